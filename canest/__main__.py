@@ -1,0 +1,3 @@
+from canest.cli import main
+
+main()
