@@ -1,0 +1,112 @@
+"""Test maneuvers and the driver that performs them.
+
+Path maneuvers (``dlc``, ``slalom``) give a reference path y(X) that a
+pure-pursuit driver with preview follows; open-loop maneuvers (``sine``,
+``step``) give the steering wheel angle as a function of time. A PI speed
+controller holds the target speed with the four motor torques.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Callable, Optional
+
+import numpy as np
+
+from canest.config import VehicleParams
+from canest.sim.plant import AIR_DENSITY, DRAG_AREA, GRAVITY
+from canest.sim.tire import TireParams
+
+# ISO 3888-1 double lane change: entry 15 m, offset transition 30 m, offset lane
+# 25 m, return 25 m, exit 30 m; lateral offset of the lane centres 3.5 m.
+DLC_OFFSET = 3.5
+DLC_SECTIONS = (15.0, 30.0, 25.0, 25.0, 30.0)
+LEAD_TIME = 1.0  # s of straight driving before every maneuver
+
+
+def _smoothstep(x: float, start: float, length: float) -> float:
+    s = min(max((x - start) / length, 0.0), 1.0)
+    return 0.5 - 0.5 * math.cos(math.pi * s)
+
+
+def iso3888_path(x: float) -> float:
+    entry, change, offset_lane, back, _ = DLC_SECTIONS
+    out = _smoothstep(x, entry, change)
+    ret = _smoothstep(x, entry + change + offset_lane, back)
+    return DLC_OFFSET * (out - ret)
+
+
+@dataclass(frozen=True)
+class Maneuver:
+    name: str
+    duration: float
+    path: Optional[Callable[[float], float]] = None  # y_ref(X), m
+    steering_wheel: Optional[Callable[[float], float]] = None  # swa(t), rad
+    start_x: float = 0.0
+
+
+def make_maneuver(name: str, speed: float, amplitude_deg: Optional[float] = None, duration: Optional[float] = None) -> Maneuver:
+    """Build a maneuver for a target speed (m/s). ``amplitude_deg`` is the steering wheel amplitude of sine/step."""
+    lead = LEAD_TIME * speed
+    if name == "dlc":
+        length = sum(DLC_SECTIONS)
+        return Maneuver(name, duration or LEAD_TIME + length / max(speed, 1.0) + 1.5, path=iso3888_path, start_x=-lead)
+    if name == "slalom":
+        spacing, amplitude, first = 36.0, 1.2, 10.0
+
+        def slalom(x: float) -> float:
+            return amplitude * math.sin(math.pi * (x - first) / spacing) if x > first else 0.0
+
+        return Maneuver(name, duration or 15.0, path=slalom, start_x=-lead)
+    if name == "sine":
+        amp = math.radians(60.0 if amplitude_deg is None else amplitude_deg)
+        return Maneuver(name, duration or 13.0,
+                        steering_wheel=lambda t: amp * math.sin(2 * math.pi * (t - LEAD_TIME) / 4.0) if t > LEAD_TIME else 0.0)
+    if name == "step":
+        amp = math.radians(45.0 if amplitude_deg is None else amplitude_deg)
+        return Maneuver(name, duration or 8.0,
+                        steering_wheel=lambda t: amp * min(max((t - LEAD_TIME) / 0.2, 0.0), 1.0))
+    raise ValueError(f"unknown maneuver '{name}'; choose one of {', '.join(MANEUVERS)}")
+
+
+MANEUVERS = ("dlc", "slalom", "sine", "step")
+
+
+class Driver:
+    """Pure-pursuit path follower with preview, a first-order steering lag, and a PI speed controller."""
+
+    PREVIEW_TIME = 0.6  # s
+    MIN_PREVIEW = 6.0  # m
+    STEER_LAG = 0.08  # s
+    SPEED_GAIN = 0.8  # 1/s, P gain on speed error as acceleration demand
+    SPEED_INTEGRAL = 0.2  # 1/s^2
+    MAX_TORQUE = 1200.0  # N m per motor
+
+    def __init__(self, vehicle: VehicleParams, maneuver: Maneuver, target_speed: float):
+        self.p = vehicle
+        self.maneuver = maneuver
+        self.target_speed = target_speed
+        self.delta = 0.0
+        self.speed_integral = 0.0
+
+    def steering_wheel_angle(self, t: float, x: float, y: float, psi: float, vx: float, dt: float) -> float:
+        """Steering wheel angle (rad) to apply now; updates the driver's lag state."""
+        m = self.maneuver
+        if m.steering_wheel is not None:
+            return m.steering_wheel(t)
+        preview = max(self.MIN_PREVIEW, self.PREVIEW_TIME * vx)
+        target_x = x + preview * math.cos(psi)
+        dx, dy = target_x - x, m.path(target_x) - y
+        lateral = -dx * math.sin(psi) + dy * math.cos(psi)
+        command = math.atan(2.0 * self.p.wheelbase * lateral / preview**2)
+        self.delta += (command - self.delta) * min(dt / self.STEER_LAG, 1.0)
+        return self.delta * self.p.steering_ratio
+
+    def motor_torques(self, vx: float, dt: float) -> np.ndarray:
+        """Equal torque on the four motors from a PI speed controller with drag feed-forward."""
+        error = self.target_speed - vx
+        self.speed_integral += error * dt
+        demand = self.SPEED_GAIN * error + self.SPEED_INTEGRAL * self.speed_integral
+        drag = 0.5 * AIR_DENSITY * DRAG_AREA * vx * abs(vx) + TireParams().rolling_resistance * self.p.mass * GRAVITY
+        total = self.p.mass * demand * self.p.wheel_radius + drag * self.p.wheel_radius
+        return np.full(4, float(np.clip(total / 4.0, -self.MAX_TORQUE, self.MAX_TORQUE)))

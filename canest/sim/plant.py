@@ -1,0 +1,121 @@
+"""Nonlinear two-track vehicle plant: the simulator's truth.
+
+ISO 8855 axes (x forward, y left, z up). Wheels in the order fl, fr, rl, rr at
+body positions ``(a, +tf/2), (a, -tf/2), (-b, +tr/2), (-b, -tr/2)``.
+
+State (16): global X, Y, heading psi; body vx, vy, yaw rate r; wheel speeds
+w[4]; relaxed lateral tire forces Fy[4]; lagged body accelerations ax_l, ay_l
+used for load transfer (suspension pitch/roll lag ``LOAD_TRANSFER_TAU``).
+
+Per wheel: centre velocity ``(vx - r y_i, vy + r x_i)`` rotated into the wheel
+frame by its steer angle gives ``v_long, v_lat``; slip angle
+``alpha = -atan(v_lat / |v_long|)``, slip ratio ``kappa = (w R - v_long) / |v_long|``.
+Loads (DICI-GFCKF paper eq 7, with lagged accelerations):
+``Fz_ij = m (g l_other / (2L) -+ ax h / (2L) -+ ay h l_other / (t L))``.
+Tire forces from :mod:`canest.sim.tire`; lateral forces follow the steady
+state with relaxation ``dFy/dt = |v_long| / sigma (Fy_ss - Fy)`` (paper eq 6).
+Chassis: ``m (dvx/dt - r vy) = sum Fx_b - drag``, ``m (dvy/dt + r vx) = sum Fy_b``,
+``Iz dr/dt = sum (x_i Fy_b,i - y_i Fx_b,i)``; wheels: ``J dw/dt = T - R Fx - R f_rr Fz``.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from canest.config import VehicleParams
+from canest.sim.tire import TireParams, combined_forces
+
+GRAVITY = 9.81
+AIR_DENSITY = 1.2
+DRAG_AREA = 0.7  # Cd * A, m^2
+LOAD_TRANSFER_TAU = 0.08  # s
+MIN_SLIP_SPEED = 1.0  # m/s, guards slip definitions near standstill
+
+X, Y, PSI, VX, VY, R = range(6)
+W = slice(6, 10)
+FY = slice(10, 14)
+AXL, AYL = 14, 15
+STATE_SIZE = 16
+FRONT = np.array([True, True, False, False])
+
+
+@dataclass
+class PlantOutputs:
+    """Quantities of one instant that sensors and the truth table need."""
+
+    ax: float
+    ay: float
+    fx: np.ndarray
+    fy: np.ndarray
+    fz: np.ndarray
+    alpha: np.ndarray
+    kappa: np.ndarray
+
+
+class TwoTrackPlant:
+    def __init__(self, vehicle: VehicleParams, mu, tire: TireParams = TireParams()):
+        self.p = vehicle
+        self.tire = tire
+        self.mu = np.broadcast_to(np.asarray(mu, dtype=float), (4,)).copy()
+        a, b, L = vehicle.cg_to_front, vehicle.cg_to_rear, vehicle.wheelbase
+        tf, tr = vehicle.track_front, vehicle.track_rear
+        self.pos_x = np.array([a, a, -b, -b])
+        self.pos_y = np.array([tf / 2, -tf / 2, tr / 2, -tr / 2])
+        m = vehicle.mass
+        self.fz_static = m * GRAVITY * np.array([b, b, a, a]) / (2 * L)
+        sign_lr = np.array([-1.0, 1.0, -1.0, 1.0])  # left wheels unload in a left turn
+        self.fz_ax = m * vehicle.cg_height / (2 * L) * np.array([-1.0, -1.0, 1.0, 1.0])
+        self.fz_ay = m * vehicle.cg_height / L * sign_lr * np.array([b / tf, b / tf, a / tr, a / tr])
+
+    def initial_state(self, speed: float) -> np.ndarray:
+        s = np.zeros(STATE_SIZE)
+        s[VX] = speed
+        s[W] = speed / self.p.wheel_radius
+        return s
+
+    def _forces(self, s: np.ndarray, delta: float):
+        steer = np.where(FRONT, delta, 0.0)
+        vx_w = s[VX] - s[R] * self.pos_y
+        vy_w = s[VY] + s[R] * self.pos_x
+        cos_d, sin_d = np.cos(steer), np.sin(steer)
+        v_long = vx_w * cos_d + vy_w * sin_d
+        v_lat = -vx_w * sin_d + vy_w * cos_d
+        speed = np.maximum(np.abs(v_long), MIN_SLIP_SPEED)
+        alpha = -np.arctan2(v_lat, speed)
+        kappa = (s[W] * self.p.wheel_radius - v_long) / speed
+        fz = np.maximum(self.fz_static + self.fz_ax * s[AXL] + self.fz_ay * s[AYL], 0.0)
+        fx, fy_ss = combined_forces(alpha, kappa, fz, self.mu, self.fz_static, FRONT, self.tire)
+        return steer, cos_d, sin_d, speed, alpha, kappa, fz, fx, fy_ss
+
+    def derivatives(self, s: np.ndarray, delta: float, torque: np.ndarray):
+        p = self.p
+        steer, cos_d, sin_d, speed, alpha, kappa, fz, fx, fy_ss = self._forces(s, delta)
+        fy = s[FY]
+        fx_b = fx * cos_d - fy * sin_d
+        fy_b = fx * sin_d + fy * cos_d
+        drag = 0.5 * AIR_DENSITY * DRAG_AREA * s[VX] * abs(s[VX])
+        ax = (fx_b.sum() - drag) / p.mass
+        ay = fy_b.sum() / p.mass
+        d = np.empty(STATE_SIZE)
+        cos_psi, sin_psi = np.cos(s[PSI]), np.sin(s[PSI])
+        d[X] = s[VX] * cos_psi - s[VY] * sin_psi
+        d[Y] = s[VX] * sin_psi + s[VY] * cos_psi
+        d[PSI] = s[R]
+        d[VX] = ax + s[R] * s[VY]
+        d[VY] = ay - s[R] * s[VX]
+        d[R] = (self.pos_x @ fy_b - self.pos_y @ fx_b) / p.yaw_inertia
+        rolling = self.tire.rolling_resistance * fz * np.tanh(s[W] / 0.5)
+        d[W] = (torque - p.wheel_radius * (fx + rolling)) / p.wheel_inertia
+        d[FY] = speed / self.tire.relaxation_length * (fy_ss - fy)
+        d[AXL] = (ax - s[AXL]) / LOAD_TRANSFER_TAU
+        d[AYL] = (ay - s[AYL]) / LOAD_TRANSFER_TAU
+        return d, PlantOutputs(ax, ay, fx, fy.copy(), fz, alpha, kappa)
+
+    def step(self, s: np.ndarray, delta: float, torque: np.ndarray, dt: float) -> np.ndarray:
+        """One RK4 step with steering and torques held."""
+        k1, _ = self.derivatives(s, delta, torque)
+        k2, _ = self.derivatives(s + 0.5 * dt * k1, delta, torque)
+        k3, _ = self.derivatives(s + 0.5 * dt * k2, delta, torque)
+        k4, _ = self.derivatives(s + dt * k3, delta, torque)
+        return s + dt / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)

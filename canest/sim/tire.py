@@ -1,0 +1,56 @@
+"""Magic Formula tire of the simulation plant (Pacejka, "Tire and Vehicle Dynamics").
+
+``F = D sin(C atan(B s - E (B s - atan(B s))))`` with peak ``D = mu Fz`` and
+stiffness ``B C D`` equal to the tire's slip stiffness, which grows
+degressively with load: ``C_s(Fz) = c Fz0 sin(2 atan(Fz / (1.5 Fz0))) / sin(2 atan(1/1.5))``.
+Combined slip: the lateral force shrinks with the used longitudinal friction,
+``Fy = Fy0 sqrt(1 - (Fx / (mu Fz))^2)`` (friction ellipse).
+All functions are vectorized over the four wheels.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+_LOAD_SHAPE = np.sin(2.0 * np.arctan(1.0 / 1.5))
+
+
+@dataclass(frozen=True)
+class TireParams:
+    """Per-tire coefficients of the plant; stiffness coefficients are per unit nominal load."""
+
+    lateral_stiffness_front: float = 11.0  # cornering stiffness / Fz0, 1/rad
+    lateral_stiffness_rear: float = 14.0
+    lateral_shape: float = 1.3  # C
+    lateral_curvature: float = -0.6  # E
+    longitudinal_stiffness: float = 16.0  # slip stiffness / Fz0, per unit slip
+    longitudinal_shape: float = 1.6
+    longitudinal_curvature: float = 0.2
+    relaxation_length: float = 0.6  # m
+    rolling_resistance: float = 0.012
+
+
+def slip_stiffness(coefficient: np.ndarray, fz: np.ndarray, fz_nominal: np.ndarray) -> np.ndarray:
+    """Load-sensitive slip stiffness, equal to ``coefficient * fz_nominal`` at nominal load."""
+    load = np.maximum(fz, 0.0)
+    return coefficient * fz_nominal * np.sin(2.0 * np.arctan(load / (1.5 * fz_nominal))) / _LOAD_SHAPE
+
+
+def magic_formula(slip: np.ndarray, stiffness: np.ndarray, shape: float, curvature: float, peak: np.ndarray) -> np.ndarray:
+    """Pacejka's Magic Formula with B = stiffness / (C D)."""
+    peak = np.maximum(peak, 1e-6)
+    bs = stiffness / (shape * peak) * slip
+    return peak * np.sin(shape * np.arctan(bs - curvature * (bs - np.arctan(bs))))
+
+
+def combined_forces(alpha, kappa, fz, mu, fz_nominal, front_mask, tire: TireParams):
+    """Steady-state (Fx, Fy) of each tire from slip angle, slip ratio, load and friction."""
+    peak = mu * np.maximum(fz, 0.0)
+    lateral_coeff = np.where(front_mask, tire.lateral_stiffness_front, tire.lateral_stiffness_rear)
+    fx = magic_formula(kappa, slip_stiffness(tire.longitudinal_stiffness, fz, fz_nominal),
+                       tire.longitudinal_shape, tire.longitudinal_curvature, peak)
+    fy0 = magic_formula(alpha, slip_stiffness(lateral_coeff, fz, fz_nominal),
+                        tire.lateral_shape, tire.lateral_curvature, peak)
+    usage = np.clip(fx / np.maximum(peak, 1e-6), -1.0, 1.0)
+    return fx, fy0 * np.sqrt(1.0 - usage**2)
