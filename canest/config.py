@@ -86,6 +86,7 @@ class EstimatorConfig:
     min_speed: float = 3.0
     speed_hysteresis: float = 1.0
     timeout_cycles: float = 5.0
+    latency_compensation: bool = False
     process_noise: dict = field(default_factory=lambda: {"yaw_rate": 0.05, "beta": 0.01, "vx": 0.3})
     measurement_noise: dict = field(default_factory=lambda: {"ay": 0.15, "yaw_rate": 0.005, "vx_wheel": 0.15})
     initial_std: dict = field(default_factory=lambda: {"yaw_rate": 0.05, "beta": 0.05, "vx": 2.0})
@@ -220,7 +221,11 @@ def _estimator(doc: _Document) -> EstimatorConfig:
         merged = {**getattr(defaults, name)}
         merged.update({k: doc.number(key_path + (name,), given, k) for k in given})
         values[name] = merged
-    from canest.filters import FILTERS, FACTORIZATIONS
+    from canest.filters import FACTORIZATIONS, FILTERS
+
+    compensation = section.get("latency_compensation", defaults.latency_compensation)
+    if not isinstance(compensation, bool):
+        raise doc.error(key_path + ("latency_compensation",), f"must be true or false, got {compensation!r}")
 
     name = str(section.get("filter", defaults.filter))
     if name not in FILTERS:
@@ -228,7 +233,7 @@ def _estimator(doc: _Document) -> EstimatorConfig:
     factorization = str(section.get("factorization", defaults.factorization))
     if factorization not in FACTORIZATIONS:
         raise doc.error(key_path + ("factorization",), f"must be one of {', '.join(FACTORIZATIONS)}")
-    return EstimatorConfig(filter=name, factorization=factorization, **values)
+    return EstimatorConfig(filter=name, factorization=factorization, latency_compensation=compensation, **values)
 
 
 def _signal_specs(doc: _Document, database, dbc_path: Path) -> dict:
