@@ -70,19 +70,30 @@ def replay(config: Config, log_path, out_log=None, out_csv=None, progress: bool 
 
 def play(log_path, bus: can.BusABC, speed: float = 1.0, progress: bool = True) -> int:
     """Send a log's frames onto ``bus`` at their recorded timing (like canplayer); return frames sent."""
-    sent = 0
     reader = open_log(log_path)
-    start_wall, start_log = None, None
-    with tqdm(desc=f"play {Path(log_path).name}", unit=" frames", disable=not progress, leave=False) as bar:
-        for msg in reader:
+    try:
+        return play_messages(reader, bus, speed, progress, desc=f"play {Path(log_path).name}")
+    finally:
+        reader.stop()
+
+
+def play_messages(messages, bus: can.BusABC, speed: float = 1.0, progress: bool = False, desc: str = "play",
+                  stop=None) -> int:
+    """Send messages at the spacing of their timestamps divided by ``speed``; ``stop`` (an Event) ends early."""
+    sent = 0
+    start_wall = start_log = None
+    with tqdm(desc=desc, unit=" frames", disable=not progress, leave=False) as bar:
+        for msg in messages:
+            if stop is not None and stop.is_set():
+                break
             if start_wall is None:
                 start_wall, start_log = time.perf_counter(), msg.timestamp
             delay = (msg.timestamp - start_log) / speed - (time.perf_counter() - start_wall)
             if delay > 0:
                 time.sleep(delay)
-            msg.timestamp = time.time()
-            bus.send(msg)
+            bus.send(can.Message(timestamp=time.time(), arbitration_id=msg.arbitration_id,
+                                 is_extended_id=msg.is_extended_id, is_remote_frame=msg.is_remote_frame,
+                                 is_fd=msg.is_fd, bitrate_switch=msg.bitrate_switch, dlc=msg.dlc, data=msg.data))
             sent += 1
             bar.update()
-    reader.stop()
     return sent

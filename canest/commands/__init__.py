@@ -1,0 +1,1 @@
+"""One module per ``canest`` sub-command; each has ``register(subparsers)``."""

@@ -1,0 +1,46 @@
+"""canest check: validate a config and its DBCs, and show the resolved signal map."""
+from __future__ import annotations
+
+from canest.commands.common import FORMATTER, add_config, config_from_args
+from canest.codec import InputDecoder
+from canest.outputs import EstimateEncoder
+from canest.pipeline import input_timeouts
+from canest.signals import si_unit
+
+EPILOG = """Every error names the file, the line and the key, message or signal.
+Exit status 0 when the config is usable, 2 when it is not."""
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser("check", help="validate config and DBCs, print the resolved signal map",
+                              description=__doc__, epilog=EPILOG, formatter_class=FORMATTER)
+    add_config(p)
+    p.set_defaults(func=run)
+
+
+def run(args) -> int:
+    config = config_from_args(args)
+    decoder = InputDecoder(config)
+    EstimateEncoder(config.output_dbc)
+    timeouts = input_timeouts(config, decoder)
+    v = config.vehicle
+    print(f"config   {config.path}")
+    print(f"vehicle  {v.name}: m={v.mass:g} kg, Iz={v.yaw_inertia:g} kg m^2, a={v.cg_to_front:g} m, "
+          f"b={v.cg_to_rear:g} m, steering ratio {v.steering_ratio:g}")
+    print(f"input    {config.input_dbc} on {config.input_bus.interface}:{config.input_bus.channel}")
+    print(f"output   {config.output_dbc} on {config.output_bus.interface}:{config.output_bus.channel}")
+    e = config.estimator
+    print(f"filter   {e.filter} ({e.factorization}) at {e.rate_hz:g} Hz, low-speed below {e.min_speed:g} m/s")
+    print()
+    print(f"{'canonical':<22} {'message.signal':<40} {'id':>6} {'cycle':>6} {'timeout':>8}  SI = factor * DBC value + offset")
+    for plan in decoder.plans.values():
+        for spec in plan.specs:
+            cycle = f"{plan.message.cycle_time}ms" if plan.message.cycle_time else "-"
+            print(f"{spec.canonical:<22} {spec.message + '.' + spec.signal:<40} {plan.message.frame_id:>#6x} "
+                  f"{cycle:>6} {timeouts[spec.canonical]:>7.3f}s  {si_unit(spec.canonical)} = "
+                  f"{spec.factor:.6g} * value + {spec.offset:g}")
+    checked = [f"{name} ({', '.join(k for k, v in vars(c).items() if v)})" for name, c in config.messages.items()]
+    if checked:
+        print("\nintegrity checks: " + "; ".join(checked))
+    print("\nOK")
+    return 0
