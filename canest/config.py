@@ -236,7 +236,7 @@ def _estimator(doc: _Document) -> EstimatorConfig:
     return EstimatorConfig(filter=name, factorization=factorization, latency_compensation=compensation, **values)
 
 
-def _signal_specs(doc: _Document, database, dbc_path: Path) -> dict:
+def _signal_specs(doc: _Document, database, dbc_path: Path, vehicle: VehicleParams) -> dict:
     key_path = ("input", "signals")
     section = doc.section(key_path)
     specs = {}
@@ -263,7 +263,7 @@ def _signal_specs(doc: _Document, database, dbc_path: Path) -> dict:
         if signal.unit and entry.get("unit") and signal.unit.strip() != str(unit).strip():
             raise doc.error(where + ("unit",), f"'{unit}' contradicts the DBC unit '{signal.unit}' of {message_name}.{signal_name}")
         try:
-            factor = sig.si_factor(canonical, str(unit))
+            factor = sig.si_factor(canonical, str(unit), vehicle.wheel_radius)
         except ValueError as exc:
             raise doc.error(where + ("unit",), str(exc)) from None
         sign = entry.get("sign", 1)
@@ -321,7 +321,7 @@ def load_config(path) -> Config:
     output_dbc = _dbc_path(doc, ("output", "dbc"))
     input_db = load_database(input_dbc, f"{path}: input.dbc")
     load_database(output_dbc, f"{path}: output.dbc")
-    specs = _signal_specs(doc, input_db, input_dbc)
+    specs = _signal_specs(doc, input_db, input_dbc, vehicle)
     return Config(
         path=path.resolve(),
         vehicle=vehicle,

@@ -51,7 +51,7 @@ def replay(config: Config, log_path, out_log=None, out_csv=None, progress: bool 
         writer = stack.enter_context(can.Logger(str(out_log))) if out_log else None
         csv_writer = stack.enter_context(EstimateCsvWriter(out_csv)) if out_csv else None
         bar = stack.enter_context(tqdm(total=os.path.getsize(log_path), unit="B", unit_scale=True,
-                                       desc=f"replay {Path(log_path).name}", disable=not progress, leave=False))
+                                       desc=f"replay {Path(log_path).name}", disable=None if progress else True, leave=False))
         position = _byte_position(reader)
         for count, msg in enumerate(reader, 1):
             for estimate in pipeline.feed(msg):
@@ -82,7 +82,7 @@ def play_messages(messages, bus: can.BusABC, speed: float = 1.0, progress: bool 
     """Send messages at the spacing of their timestamps divided by ``speed``; ``stop`` (an Event) ends early."""
     sent = 0
     start_wall = start_log = None
-    with tqdm(desc=desc, unit=" frames", disable=not progress, leave=False) as bar:
+    with tqdm(desc=desc, unit=" frames", disable=None if progress else True, leave=False) as bar:
         for msg in messages:
             if stop is not None and stop.is_set():
                 break

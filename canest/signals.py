@@ -17,6 +17,8 @@ UNITS = {
     "acceleration": ("m/s^2", {"m/s^2": 1.0, "m/s2": 1.0, "g": G0}),
     "torque": ("N m", {"N m": 1.0, "Nm": 1.0, "kNm": 1000.0}),
 }
+# Wheel speeds given as a linear speed are divided by the wheel radius.
+LINEAR_SPEED_UNITS = {"m/s": 1.0, "km/h": 1.0 / 3.6, "kph": 1.0 / 3.6, "mph": 0.44704}
 
 WHEELS = ("fl", "fr", "rl", "rr")
 
@@ -49,14 +51,19 @@ def si_unit(canonical: str) -> str:
     return UNITS[CANONICAL[canonical]][0]
 
 
-def si_factor(canonical: str, unit: str) -> float:
+def si_factor(canonical: str, unit: str, wheel_radius: float) -> float:
     """Factor that turns a value in ``unit`` into the SI unit of ``canonical``.
 
-    Raises ValueError naming the accepted units when ``unit`` does not fit.
+    Wheel speeds may also be given as the wheel's linear speed (km/h, m/s,
+    mph): they become rad/s through ``wheel_radius``. Raises ValueError
+    naming the accepted units when ``unit`` does not fit.
     """
     quantity = CANONICAL[canonical]
     accepted = UNITS[quantity][1]
     key = unit.strip()
+    if canonical.startswith("wheel_speed_") and key in LINEAR_SPEED_UNITS:
+        return LINEAR_SPEED_UNITS[key] / wheel_radius
     if key not in accepted:
-        raise ValueError(f"unit '{unit}' is not a unit of {quantity}; use one of {sorted(accepted)}")
+        extra = sorted(LINEAR_SPEED_UNITS) if canonical.startswith("wheel_speed_") else []
+        raise ValueError(f"unit '{unit}' is not a unit of {quantity}; use one of {sorted(accepted) + extra}")
     return accepted[key]

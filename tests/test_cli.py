@@ -1,0 +1,70 @@
+"""The canest command as a user runs it."""
+import subprocess
+import sys
+
+import can
+import cantools
+import pytest
+
+from canest.evaluate import read_table
+from tests.conftest import ROOT
+
+CANEST = [sys.executable, "-m", "canest"]
+
+
+def canest(*args, check=True):
+    result = subprocess.run([*CANEST, *map(str, args)], capture_output=True, text=True, timeout=300)
+    if check and result.returncode != 0:
+        raise AssertionError(f"canest {' '.join(map(str, args))} failed:\n{result.stdout}\n{result.stderr}")
+    return result
+
+
+def test_help_lists_every_command():
+    out = canest("--help").stdout
+    for command in ("demo", "run", "replay", "simulate", "evaluate", "check"):
+        assert command in out
+    assert "--maneuver" in canest("simulate", "--help").stdout
+
+
+@pytest.mark.parametrize("suffix", [".log", ".asc", ".blf"])
+def test_simulate_replay_evaluate(tmp_path, suffix):
+    log, truth = tmp_path / f"drive{suffix}", tmp_path / "truth.csv"
+    out = canest("simulate", "--maneuver", "dlc", "--speed", 80, "--mu", 0.85, "--out", log, "--truth", truth)
+    assert "frames" in out.stdout
+    est_log, est_csv = tmp_path / "est.log", tmp_path / "est.csv"
+    out = canest("replay", log, "--config", ROOT / "configs" / "dici_ev.yaml", "--out", est_log, "--csv", est_csv, "-q")
+    assert out.stdout.startswith("frames=")
+    frames = int(out.stdout.split()[0].split("=")[1])
+    assert f"decoded={frames}" in out.stdout  # nothing lost or rejected
+    table = read_table(est_csv)
+    assert list(table)[:5] == ["t", "vx", "vy", "beta", "yaw_rate"]
+    assert {"vx_std", "vy_std", "beta_std", "yaw_rate_std", "valid", "mode"} <= set(table)
+    db = cantools.database.load_file(str(ROOT / "dbc" / "canest_estimates.dbc"))
+    decoded = [db.decode_message(m.arbitration_id, m.data) for m in can.LogReader(str(est_log))
+               if m.arbitration_id == 0x501]
+    assert len(decoded) == len(table["t"])
+    assert decoded[-1]["YawRate"] == pytest.approx(table["yaw_rate"][-1], abs=1e-4)
+    report = canest("evaluate", est_csv, truth, "--plot", tmp_path / "plot.png").stdout
+    assert "RMSE" in report and "beta" in report
+    assert (tmp_path / "plot.png").stat().st_size > 10000
+
+
+def test_check_prints_the_resolved_map():
+    out = canest("check", "--config", ROOT / "configs" / "production_example.yaml").stdout
+    assert "EPS_STEERING.STW_ANGLE" in out and "0x1806e5f4" in out and out.strip().endswith("OK")
+
+
+def test_errors_are_one_clear_line_and_exit_2(tmp_path):
+    result = canest("check", "--config", tmp_path / "missing.yaml", check=False)
+    assert result.returncode == 2
+    assert result.stderr.strip() == f"canest: error: {tmp_path / 'missing.yaml'}: config file not found"
+    result = canest("replay", tmp_path / "nope.log", check=False)
+    assert result.returncode == 2 and "nope.log: log file not found" in result.stderr
+    result = canest("simulate", "--mu", "abc", "--out", tmp_path / "x.log", "--truth", tmp_path / "t.csv", check=False)
+    assert result.returncode == 2 and "--mu" in result.stderr
+
+
+def test_run_on_a_bus_that_does_not_exist_fails_cleanly():
+    result = canest("run", "--interface", "socketcan", "--channel", "nosuchcan9", check=False)
+    assert result.returncode == 2
+    assert "cannot open input bus socketcan:nosuchcan9" in result.stderr
