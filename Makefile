@@ -1,0 +1,33 @@
+# make demo : create .venv, install canest, run the live demo on virtual CAN (no vehicle, no root)
+# make test : also install the SocketCAN test lane (apt), run the tests on the host,
+#             then the real-vcan tests inside a User-Mode-Linux guest
+PYTHON ?= python3
+VENV ?= .venv
+BIN := $(VENV)/bin
+
+.PHONY: demo test test-host test-vcan setup system-deps clean
+
+demo: $(BIN)/canest
+	$(BIN)/canest demo
+
+test: test-host test-vcan
+
+test-host: $(BIN)/canest
+	$(BIN)/python -m pytest -m "not socketcan"
+
+test-vcan: $(BIN)/canest system-deps
+	tools/vcan-guest -- env CANEST_REQUIRE_SOCKETCAN=1 $(BIN)/python -m pytest -m socketcan
+
+setup: $(BIN)/canest system-deps
+
+system-deps:
+	tools/install-system-deps
+
+$(BIN)/canest: pyproject.toml
+	$(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install --quiet --upgrade pip
+	$(BIN)/python -m pip install --quiet -e '.[test]'
+	touch $@
+
+clean:
+	rm -rf $(VENV) *.egg-info .pytest_cache
