@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import argparse
+import signal
 import sys
 
 from canest import __version__
@@ -33,6 +34,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv=None) -> None:
+    signal.signal(signal.SIGPIPE, signal.SIG_DFL)  # `canest check | head` ends quietly
     args = build_parser().parse_args(argv)
     try:
         sys.exit(args.func(args))

@@ -57,3 +57,48 @@ def test_demo_runs_and_reports_accuracy(config):
     assert scores["vx"].rmse < 0.2
     assert scores["beta"].rmse < 1.0
     assert scores["yaw_rate"].samples > 100
+
+
+def test_idle_bus_keeps_ticking_and_reports_missing_inputs(config, dlc_run):
+    _, _, sim = dlc_run
+    live_config = config.with_buses(BusConfig("virtual", "idle-in"), BusConfig("virtual", "idle-out"))
+    live = []
+    service = Service(live_config, on_estimate=live.append)
+    player_bus = can.Bus(interface="virtual", channel="idle-in")
+    first_second = [f for f in sim.frames if f.timestamp < sim.frames[0].timestamp + 1.0]
+
+    def player():
+        time.sleep(0.2)
+        play_messages(first_second, player_bus)
+        time.sleep(1.0)  # the bus goes quiet
+        service.stop()
+
+    thread = threading.Thread(target=player)
+    thread.start()
+    service.run()
+    thread.join()
+    player_bus.shutdown()
+    assert len(live) > 170  # ~1 s of traffic plus ~0.9 s of idle ticks at 100 Hz
+    assert live[-1].mode == "no_input"
+    assert set(live[-1].missing) == {"steering", "wheel_speeds", "motor_torques", "imu", "imu_2"}
+    assert not any(live[-1].valid.values())
+
+
+def test_time_jump_and_backwards_timestamps_are_counted_not_stepped(config, dlc_run):
+    from canest.pipeline import Pipeline
+
+    _, _, sim = dlc_run
+    pipeline = Pipeline(config)
+    frames = sim.frames[:300]
+    for frame in frames:
+        pipeline.feed(frame)
+    ticks_before = pipeline.clock.k
+    late = [can.Message(timestamp=f.timestamp + 3600.0, arbitration_id=f.arbitration_id, data=f.data,
+                        is_extended_id=False) for f in sim.frames[300:400]]
+    estimates = [e for f in late for e in pipeline.feed(f)]
+    assert pipeline.counts["time_jumps"] == 1
+    assert len(estimates) < 30, "an hour's gap must not be stepped through tick by tick"
+    old = can.Message(timestamp=frames[0].timestamp, arbitration_id=0x7FF, data=b"", is_extended_id=False)
+    assert pipeline.feed(old) == []
+    assert pipeline.counts["time_backwards"] == 1
+    assert ticks_before > 0
