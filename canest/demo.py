@@ -18,6 +18,7 @@ import numpy as np
 
 from canest.config import BusConfig, Config
 from canest.evaluate import format_table, score
+from canest.pipeline import format_summary
 from canest.replay import play_messages
 from canest.service import Service
 from canest.sim.simulate import simulate
@@ -43,6 +44,12 @@ class _Monitor(threading.Thread):
     def _truth(self, name, t):
         return float(np.interp(t, self.truth["t"], self.truth[name]))
 
+    def _shown(self, name, valid, factor, width) -> str:
+        """The latest decoded value, or dashes while its validity bit is clear."""
+        if not self.latest.get(valid, 0):
+            return "--".rjust(width)
+        return f"{self.latest[name] * factor:{width}.2f}"
+
     def run(self) -> None:
         next_line = 0.0
         print(f"{'t [s]':>6} | {'vx [m/s] est (true)':>20} | {'yaw rate [deg/s]':>18} | {'sideslip [deg]':>16} | mode",
@@ -56,13 +63,15 @@ class _Monitor(threading.Thread):
             except KeyError:
                 continue
             t = (msg.timestamp - self.clock["wall0"]) * self.speed + self.truth["t"][0]
-            if t >= next_line and "Vx" in self.latest and "Sideslip" in self.latest:
+            if t >= next_line and {"Vx", "Sideslip", "Mode"} <= set(self.latest):
                 next_line = t + DISPLAY_EVERY
-                d = math.degrees
-                print(f"{t:6.2f} | {self.latest['Vx']:8.2f} ({self._truth('vx', t):8.2f})  | "
-                      f"{d(self.latest['YawRate']):7.2f} ({d(self._truth('yaw_rate', t)):7.2f}) | "
-                      f"{d(self.latest['Sideslip']):6.2f} ({d(self._truth('beta', t)):6.2f}) | "
-                      f"{self.latest.get('Mode', '')}", file=self.out, flush=True)
+                vx = self._shown("Vx", "VxValid", 1.0, 8)
+                yaw = self._shown("YawRate", "YawRateValid", 180 / math.pi, 7)
+                beta = self._shown("Sideslip", "SideslipValid", 180 / math.pi, 6)
+                print(f"{t:6.2f} | {vx} ({self._truth('vx', t):8.2f})  | "
+                      f"{yaw} ({math.degrees(self._truth('yaw_rate', t)):7.2f}) | "
+                      f"{beta} ({math.degrees(self._truth('beta', t)):6.2f}) | {self.latest['Mode']}",
+                      file=self.out, flush=True)
         self.bus.shutdown()
 
 
@@ -87,7 +96,8 @@ def run_demo(config: Config, maneuver="dlc", speed_kmh=80.0, mu=0.85, seed=0, pl
             time.sleep(0.2)
             service.stop()
 
-    print(f"playing {len(sim.frames)} frames in real time on virtual bus '{INPUT_CHANNEL}'; "
+    pace = "in real time" if playback_speed == 1 else f"at {playback_speed:g}x real time"
+    print(f"playing {len(sim.frames)} frames {pace} on virtual bus '{INPUT_CHANNEL}'; "
           f"estimates on '{OUTPUT_CHANNEL}'", file=out, flush=True)
     monitor.start()
     thread = threading.Thread(target=player, daemon=True)
@@ -104,6 +114,6 @@ def run_demo(config: Config, maneuver="dlc", speed_kmh=80.0, mu=0.85, seed=0, pl
         table[name] = np.array([e.values[name] for e in estimates])
     table["valid"] = np.array([e.valid_flags for e in estimates])
     scores = score(table, sim.truth, skip=0.5)
-    print(f"\nframes: {summary}", file=out)
+    print(f"\n{format_summary(summary)}", file=out)
     print(format_table(scores, f"\naccuracy of {config.estimator.filter} against the simulator's truth"), file=out)
     return scores

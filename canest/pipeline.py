@@ -70,3 +70,9 @@ class Pipeline:
     def summary(self) -> dict:
         """Every frame accounted for: decoded, ignored by ID, rejected by cause; and timing events."""
         return {**self.decoder.counts, **self.counts, "resets": self.estimator.resets}
+
+
+def format_summary(summary: dict) -> str:
+    """One line: every input frame accounted for (decoded, ignored by ID, rejected by cause) and events."""
+    parts = [f"{k}={v}" for k, v in sorted(summary.items()) if k != "frames" and v]
+    return " ".join([f"frames={summary.get('frames', 0)}", *parts])

@@ -43,10 +43,3 @@ def write_truth(path, truth: dict) -> None:
         writer = csv.writer(handle)
         writer.writerow(names)
         writer.writerows(zip(*(truth[n] for n in names)))
-
-
-def print_summary(summary: dict, stream) -> None:
-    """Where every input frame went: decoded, ignored by ID, rejected by cause."""
-    frames = summary.get("frames", 0)
-    parts = [f"{k}={v}" for k, v in sorted(summary.items()) if k != "frames" and v]
-    print(f"frames={frames} " + " ".join(parts), file=stream)

@@ -5,7 +5,8 @@ import sys
 
 import can
 
-from canest.commands.common import FORMATTER, add_bus_overrides, add_config, config_from_args, print_summary
+from canest.commands.common import FORMATTER, add_bus_overrides, add_config, config_from_args
+from canest.pipeline import format_summary
 from canest.replay import play, replay
 from canest.service import open_bus
 
@@ -51,5 +52,5 @@ def run(args) -> int:
     if not (args.out or args.csv):
         print("note: neither --out nor --csv given; only the frame summary is printed", file=sys.stderr)
     summary = replay(config, args.log, out_log=args.out, out_csv=args.csv, progress=not args.quiet)
-    print_summary(summary, sys.stdout)
+    print(format_summary(summary))
     return 0

@@ -4,8 +4,9 @@ from __future__ import annotations
 import logging
 import sys
 
-from canest.commands.common import FORMATTER, add_bus_overrides, add_config, config_from_args, print_summary
+from canest.commands.common import FORMATTER, add_bus_overrides, add_config, config_from_args
 from canest.outputs import EstimateCsvWriter
+from canest.pipeline import format_summary
 from canest.service import Service
 
 EPILOG = """examples:
@@ -38,5 +39,5 @@ def run(args) -> int:
     finally:
         if writer:
             writer.close()
-    print_summary(summary, sys.stderr)
+    print(format_summary(summary), file=sys.stderr)
     return 0
