@@ -81,7 +81,8 @@ class MessageChecks:
 @dataclass(frozen=True)
 class EstimatorConfig:
     filter: str = "ckf"
-    factorization: str = "cholesky"
+    factorization: str | None = None  # None: the filter's own default (svd for svd-fckf, else cholesky)
+    filter_options: dict = field(default_factory=dict)
     rate_hz: float = 100.0
     min_speed: float = 3.0
     speed_hysteresis: float = 1.0
@@ -230,10 +231,28 @@ def _estimator(doc: _Document) -> EstimatorConfig:
     name = str(section.get("filter", defaults.filter))
     if name not in FILTERS:
         raise doc.error(key_path + ("filter",), f"unknown filter '{name}'; available: {', '.join(sorted(FILTERS))}")
-    factorization = str(section.get("factorization", defaults.factorization))
-    if factorization not in FACTORIZATIONS:
+    factorization = section.get("factorization", defaults.factorization)
+    if factorization is not None and factorization not in FACTORIZATIONS:
         raise doc.error(key_path + ("factorization",), f"must be one of {', '.join(FACTORIZATIONS)}")
-    return EstimatorConfig(filter=name, factorization=factorization, latency_compensation=compensation, **values)
+    options = section.get("filter_options", {})
+    if not isinstance(options, dict):
+        raise doc.error(key_path + ("filter_options",), "must be a mapping of option: value")
+    config = EstimatorConfig(filter=name, factorization=factorization, filter_options=options,
+                             latency_compensation=compensation, **values)
+    _check_filter_options(doc, config)
+    return config
+
+
+def _check_filter_options(doc: _Document, est: EstimatorConfig) -> None:
+    """Build the filter once on a dummy state so a wrong option fails at load time, naming the key."""
+    import numpy as np
+
+    from canest.estimator import make_filter
+
+    try:
+        make_filter(est, np.zeros(3), np.eye(3))
+    except (TypeError, ValueError) as exc:
+        raise doc.error(("estimator", "filter_options"), f"{est.filter}: {exc}") from None
 
 
 def _signal_specs(doc: _Document, database, dbc_path: Path, vehicle: VehicleParams) -> dict:

@@ -16,12 +16,13 @@ Per tick (:meth:`Estimator.step`):
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from canest.config import Config
-from canest.filters import FILTERS
+from canest.filters import FILTERS, Measurement, Transition
 from canest.models.single_track import BETA, VX, YAW, SingleTrackModel
 from canest.signals import INPUT_GROUPS, WHEELS
 
@@ -69,6 +70,14 @@ class _Inputs:
         return any(self.fresh.get(name, False) for name in names)
 
 
+def make_filter(est, x0, P0):
+    """The configured filter; ``factorization`` only when the config sets it (else the filter's default)."""
+    options = dict(est.filter_options)
+    if est.factorization is not None:
+        options["factorization"] = est.factorization
+    return FILTERS[est.filter](x0, P0, **options)
+
+
 class Estimator:
     def __init__(self, config: Config, resampler):
         self.config = config
@@ -84,6 +93,11 @@ class Estimator:
         self.filter = None
         self.low_speed = False
         self.resets = 0
+        self.step_times = None  # set to a list to record the seconds of each predict + update
+        self.transitions = {
+            False: Transition(self.model.transition, self.model.transition_jacobian),
+            True: Transition(self.model.transition_low_speed, self.model.transition_low_speed_jacobian),
+        }
 
     def reset(self) -> None:
         """Forget the state: the next tick with inputs initializes a new filter."""
@@ -108,7 +122,7 @@ class Estimator:
         x0 = np.zeros(3)
         x0[YAW] = inputs.values["yaw_rate"]
         x0[VX] = self._wheel_speed(inputs)
-        self.filter = FILTERS[self.est.filter](x0, self.p0, factorization=self.est.factorization)
+        self.filter = make_filter(self.est, x0, self.p0)
         self.low_speed = x0[VX] < self.est.min_speed
         return True
 
@@ -118,6 +132,16 @@ class Estimator:
             self.low_speed = vx < self.est.min_speed + self.est.speed_hysteresis
         else:
             self.low_speed = vx < self.est.min_speed
+
+    def _measurement(self, mask: np.ndarray, ages: np.ndarray) -> Measurement:
+        """The model's measurement restricted to the fresh channels (rows of ``mask``)."""
+        rates = self.model.derivatives if self.est.latency_compensation and not self.low_speed else None
+        return Measurement(
+            h=lambda X, u: self._measure_back_dated(X, u, mask, ages, rates),
+            jacobian=lambda x, u: self.model.measure_jacobian(x, u)[mask],
+            channels=tuple(np.flatnonzero(mask)),
+            parameter_jacobian=lambda x, u: self.model.measure_parameter_jacobian(x, u)[mask],
+        )
 
     def _measure_back_dated(self, X, u, mask, ages, rates) -> np.ndarray:
         """Predicted measurements at the time each sample was taken, not at the tick.
@@ -130,7 +154,7 @@ class Estimator:
         the model is right (yaw rate RMSE 0.15 -> 0.09 deg/s on the 80 km/h
         DLC) and adds the model's derivative error where it is not (tire
         saturation: 0.18 -> 0.22 deg/s on the 80 km/h 60 deg sine), hence off
-        by default.
+        by default. Linearizing filters use the Jacobian at the tick (first order).
         """
         if rates is None:
             return self.model.measure(X, u)[:, mask]
@@ -144,9 +168,9 @@ class Estimator:
             return self._publish(t, "initializing", missing, inputs)
         self._choose_mode()
         steering = inputs.values.get("steering_wheel_angle", 0.0)
-        u = np.array([steering / self.vehicle.steering_ratio, inputs.values["ax"] if inputs.has("ax") else 0.0])
-        transition = self.model.transition_low_speed if self.low_speed else self.model.transition
-        self.filter.predict(transition, u, self.dt, np.diag(self.q_density * self.dt))
+        u = np.array([steering / self.vehicle.steering_ratio, inputs.values["ax"] if inputs.has("ax") else 0.0, 1.0])
+        started = time.perf_counter()
+        self.filter.predict(self.transitions[self.low_speed], u, self.dt, np.diag(self.q_density * self.dt))
         lateral_ok = not self.low_speed and inputs.has("steering_wheel_angle", "ay")
         mask = np.array([
             lateral_ok and inputs.any_fresh("ay"),
@@ -158,9 +182,9 @@ class Estimator:
                           self._wheel_speed(inputs) if mask[2] else 0.0])[mask]
             ages = np.array([inputs.ages.get("ay", 0.0), inputs.ages["yaw_rate"],
                              float(np.mean([inputs.ages[w] for w in WHEEL_SPEEDS]))])
-            rates = self.model.derivatives if self.est.latency_compensation and not self.low_speed else None
-            self.filter.update(z, lambda X, u_: self._measure_back_dated(X, u_, mask, ages, rates), u,
-                               np.diag(self.r_std[mask] ** 2))
+            self.filter.update(z, self._measurement(mask, ages), u, np.diag(self.r_std[mask] ** 2))
+        if self.step_times is not None:
+            self.step_times.append(time.perf_counter() - started)
         if not (np.all(np.isfinite(self.filter.x)) and np.all(np.isfinite(self.filter.P))):
             self.resets += 1
             self.reset()

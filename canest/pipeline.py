@@ -69,7 +69,8 @@ class Pipeline:
 
     def summary(self) -> dict:
         """Every frame accounted for: decoded, ignored by ID, rejected by cause; and timing events."""
-        return {**self.decoder.counts, **self.counts, "resets": self.estimator.resets}
+        repairs = self.estimator.filter.repairs if self.estimator.filter is not None else 0
+        return {**self.decoder.counts, **self.counts, "resets": self.estimator.resets, "repairs": repairs}
 
 
 def format_summary(summary: dict) -> str:

@@ -43,9 +43,14 @@ def _byte_position(reader):
     return handle.tell
 
 
-def replay(config: Config, log_path, out_log=None, out_csv=None, progress: bool = True, on_estimate=None) -> dict:
-    """Run a log through the pipeline as fast as possible; return the frame summary."""
+def replay(config: Config, log_path, out_log=None, out_csv=None, progress: bool = True, on_estimate=None,
+           step_times=None) -> dict:
+    """Run a log through the pipeline as fast as possible; return the frame summary.
+
+    ``step_times``, a list, receives the seconds of every filter predict + update.
+    """
     pipeline = Pipeline(config, output_channel=config.output_bus.channel)
+    pipeline.estimator.step_times = step_times
     reader = open_log(log_path)
     with ExitStack() as stack:
         writer = stack.enter_context(can.Logger(str(out_log))) if out_log else None

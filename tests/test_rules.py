@@ -1,4 +1,4 @@
-"""The cubature rule integrates every Gaussian moment up to its degree exactly."""
+"""Every point rule integrates every Gaussian moment up to its degree exactly (n = 1..9)."""
 import itertools
 
 import numpy as np
@@ -23,17 +23,36 @@ def monomials(n, degree):
             yield np.bincount(np.array(combo, dtype=int), minlength=n)
 
 
+RULES = {
+    "third_degree_cubature": (rules.third_degree_cubature, 3, lambda n: 2 * n),
+    "fifth_degree_cubature": (rules.fifth_degree_cubature, 5, lambda n: 2 * n * n + 1),
+    "generalized_fifth_degree": (rules.generalized_fifth_degree, 5, lambda n: 2 * n * n + 1),
+    "unscented": (lambda n: rules.unscented(n)[:2], 3, lambda n: 2 * n + 1),
+}
+
+
+@pytest.mark.parametrize("name", RULES)
 @pytest.mark.parametrize("n", range(1, 10))
-def test_third_degree_rule_integrates_all_monomials_up_to_degree_3(n):
-    xi, w = rules.third_degree_cubature(n)
-    assert xi.shape == (2 * n, n)
-    assert w.sum() == pytest.approx(1.0)
-    for powers in monomials(n, 3):
-        approx = w @ np.prod(xi ** powers, axis=1)
-        assert approx == pytest.approx(gaussian_moment(powers), abs=1e-12), powers
+def test_rule_integrates_all_monomials_up_to_its_degree(name, n):
+    make, degree, count = RULES[name]
+    xi, w = make(n)
+    assert xi.shape == (count(n), n)
+    assert w.sum() == pytest.approx(1.0, abs=1e-12)
+    values = np.prod(xi[:, None, :] ** np.array(list(monomials(n, degree)))[None, :, :], axis=2)
+    exact = np.array([gaussian_moment(p) for p in monomials(n, degree)])
+    np.testing.assert_allclose(w @ values, exact, atol=1e-10)
 
 
-def test_third_degree_rule_is_not_exact_for_fourth_moments():
-    # The test above could not fail if every rule were trivially exact: the rule misses E[x^4] = 3 for n = 2.
-    xi, w = rules.third_degree_cubature(2)
-    assert w @ xi[:, 0] ** 4 == pytest.approx(2.0)
+@pytest.mark.parametrize("name, n, powers", [("third_degree_cubature", 2, (4, 0)),
+                                             ("fifth_degree_cubature", 3, (6, 0, 0)),
+                                             ("generalized_fifth_degree", 3, (2, 2, 2))])
+def test_rule_is_not_exact_beyond_its_degree(name, n, powers):
+    # Guards the test above against a moment function that every rule would pass trivially.
+    xi, w = RULES[name][0](n)
+    assert w @ np.prod(xi ** np.array(powers), axis=1) != pytest.approx(gaussian_moment(powers))
+
+
+def test_negative_weights_where_the_papers_say():
+    assert rules.fifth_degree_cubature(5)[1].min() < 0  # (4 - n) / (2 (n+2)^2)
+    assert rules.generalized_fifth_degree(7)[1].min() < 0  # (4 - n) / 18
+    assert rules.fifth_degree_cubature(4)[1].min() >= 0

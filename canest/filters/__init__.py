@@ -1,13 +1,34 @@
 """Filters, chosen by name in the config (``estimator.filter``).
 
-Each filter class takes ``(x0, P0, factorization=...)`` and offers
-``predict(f, u, dt, Q)`` and ``update(z, h, u, R)``. Adding a filter is adding
-a class and one line here.
+Each filter class takes ``(x0, P0, factorization=..., **options)`` and offers
+``predict(transition, u, dt, Q)`` and ``update(z, measurement, u, R)`` with the
+models of :mod:`canest.filters.base`. Adding a filter is adding a class and
+one line here.
 """
-from canest.filters.sigma import FACTORIZATIONS, CubatureKalmanFilter
+from canest.filters.adaptive import AdaptiveSvdFifthDegreeCKF, LimitedMemoryRandomWeightedEKF
+from canest.filters.base import Measurement, Transition
+from canest.filters.ekf import DualExtendedKalmanFilter, ExtendedKalmanFilter
+from canest.filters.robust import MaximumCorrentropySCKF
+from canest.filters.sigma import (
+    FACTORIZATIONS,
+    CubatureKalmanFilter,
+    FifthDegreeCubatureKalmanFilter,
+    GeneralizedFifthDegreeCKF,
+    UnscentedKalmanFilter,
+)
+from canest.filters.sqrt import SquareRootCubatureKalmanFilter
 
-FILTERS = {
-    "ckf": CubatureKalmanFilter,
-}
+FILTERS = {cls.name: cls for cls in (
+    ExtendedKalmanFilter,
+    DualExtendedKalmanFilter,
+    LimitedMemoryRandomWeightedEKF,
+    UnscentedKalmanFilter,
+    CubatureKalmanFilter,
+    SquareRootCubatureKalmanFilter,
+    MaximumCorrentropySCKF,
+    FifthDegreeCubatureKalmanFilter,
+    AdaptiveSvdFifthDegreeCKF,
+    GeneralizedFifthDegreeCKF,
+)}
 
-__all__ = ["FILTERS", "FACTORIZATIONS"]
+__all__ = ["FILTERS", "FACTORIZATIONS", "Measurement", "Transition"]

@@ -1,33 +1,25 @@
-"""Sigma-point / cubature Kalman filter with a pluggable point rule and factorization.
+"""Sigma-point and cubature Kalman filters with a pluggable rule and factorization.
 
-The filter knows nothing of vehicles: ``predict`` takes a vectorized transition
-``f(X, u, dt)`` and ``update`` a vectorized measurement ``h(X, u)``, both
-mapping points of shape (N, n) to (N, n) and (N, m).
+Time update (Arasaratnam & Haykin 2009; MCSCKF paper eqs 11-16; SVD-FCKF eqs 15-18;
+DICI-GFCKF eqs 28-31):
 
-Time update (Arasaratnam & Haykin 2009; MCSCKF paper eqs 11-16):
+    X_i = x + S xi_i,  S S^T = P
+    x- = sum wm_i f(X_i),   P- = sum wc_i (f(X_i) - x-)(f(X_i) - x-)^T + Q
 
-    X_i = x + S xi_i,  S S^T = P            (cubature points)
-    X*_i = f(X_i, u, dt)
-    x- = sum w_i X*_i
-    P- = sum w_i (X*_i - x-)(X*_i - x-)^T + Q
+Measurement update (MCSCKF eqs 17-22; SVD-FCKF eqs 19-26), points regenerated from P-:
 
-Measurement update (eqs 17-22), points regenerated from the predicted P-:
+    Z_i = h(X_i),  z^ = sum wm_i Z_i
+    Pzz = sum wc_i (Z_i - z^)(Z_i - z^)^T + R,   Pxz = sum wc_i (X_i - x-)(Z_i - z^)^T
+    K = Pxz Pzz^-1,  x = x- + K (z - z^)
 
-    Z_i = h(X_i, u),  z^ = sum w_i Z_i
-    Pzz = sum w_i (Z_i - z^)(Z_i - z^)^T + R,   Pxz = sum w_i (X_i - x-)(Z_i - z^)^T
-    K = Pxz Pzz^-1,   x = x- + K (z - z^)
-
-Covariance kept symmetric positive definite by construction: the update is
-written in Joseph form with the statistically linearized measurement matrix
-``H = Pxz^T P-^-1`` (for a linear h this is exactly H, and the result equals
-``P- - K Pzz K^T``):
-
-    P = (I - K H) P- (I - K H)^T + K R K^T
-
-a congruence of a positive definite matrix plus a positive semidefinite one,
-then averaged with its transpose. If the factorization of P still fails (e.g.
-after a non-finite input), P is repaired by clipping its eigenvalues to
-``EIGEN_FLOOR`` times its largest, and ``repairs`` counts it.
+The covariance update is written in Joseph form with the statistically
+linearized ``H = Pxz^T P-^-1`` (:meth:`GaussianFilter.apply_gain`); for a
+linear h it equals ``P- - K Pzz K^T``. Square root ``S``: the lower Cholesky
+factor, or from the SVD ``P = U diag(s) U^T`` the factor ``U diag(sqrt(s))``
+(DCKF paper eqs 16-19, SVD-FCKF eq 19), which exists for any symmetric
+positive semidefinite P. Rules with negative weights (fifth-degree for n > 4,
+the UKF for n > 3) can make P- indefinite; the next factorization then repairs
+it by clipping eigenvalues and counts it in ``repairs``.
 """
 from __future__ import annotations
 
@@ -35,92 +27,87 @@ import numpy as np
 import scipy.linalg
 
 from canest.filters import rules
+from canest.filters.base import GaussianFilter, Measurement, Transition, svd_root, symmetrize
 
 FACTORIZATIONS = ("cholesky", "svd")
-EIGEN_FLOOR = 1e-12
 
 
-def _symmetrize(P: np.ndarray) -> np.ndarray:
-    return 0.5 * (P + P.T)
-
-
-class SigmaPointFilter:
-    """Gaussian filter that propagates a deterministic point set.
-
-    Attributes readable after each step: ``x``, ``P``, and after an update the
-    innovation ``y``, its covariance ``S``, the gain ``K`` and the normalized
-    innovation squared ``nis``; ``repairs`` counts covariance repairs.
-    """
-
-    name = "sigma-point"
-
-    def __init__(self, x0, P0, xi: np.ndarray, weights: np.ndarray, factorization: str = "cholesky"):
+class SigmaPointFilter(GaussianFilter):
+    def __init__(self, x0, P0, xi: np.ndarray, w_mean: np.ndarray, w_cov=None, factorization: str = "cholesky"):
+        super().__init__(x0, P0)
         if factorization not in FACTORIZATIONS:
             raise ValueError(f"factorization must be one of {FACTORIZATIONS}, got {factorization!r}")
-        self.x = np.array(x0, dtype=float)
-        self.P = np.array(P0, dtype=float)
         self.xi = xi
-        self.w = weights
+        self.wm = w_mean
+        self.wc = w_mean if w_cov is None else w_cov
         self.factorization = factorization
-        self.repairs = 0
-        self.y = self.S = self.K = None
-        self.nis = 0.0
 
-    def _square_root(self, P: np.ndarray) -> np.ndarray:
-        """A matrix S with S S^T = P: lower Cholesky factor, or U sqrt(s) from the SVD (DCKF paper eqs 16-19)."""
-        if self.factorization == "svd":
-            U, s, _ = np.linalg.svd(P, hermitian=True)
-            return U * np.sqrt(s)
-        try:
-            return np.linalg.cholesky(P)
-        except np.linalg.LinAlgError:
-            self.P = self._repair(P)
-            return np.linalg.cholesky(self.P)
-
-    def _repair(self, P: np.ndarray) -> np.ndarray:
-        self.repairs += 1
-        P = np.nan_to_num(_symmetrize(P), nan=0.0, posinf=0.0, neginf=0.0)
-        values, vectors = np.linalg.eigh(P)
-        floor = EIGEN_FLOOR * max(float(values.max()), 1.0)
-        return _symmetrize((vectors * np.maximum(values, floor)) @ vectors.T)
+    def square_root(self, P: np.ndarray) -> np.ndarray:
+        return svd_root(P) if self.factorization == "svd" else self.cholesky(P)
 
     def points(self) -> np.ndarray:
-        return self.x + self.xi @ self._square_root(self.P).T
+        return self.x + self.xi @ self.square_root(self.P).T
 
-    def _weighted_cov(self, A: np.ndarray, B: np.ndarray) -> np.ndarray:
-        return (A * self.w[:, None]).T @ B
+    def _cov(self, A: np.ndarray, B: np.ndarray) -> np.ndarray:
+        return (A * self.wc[:, None]).T @ B
 
-    def predict(self, f, u, dt: float, Q: np.ndarray) -> None:
-        X = f(self.points(), u, dt)
-        self.x = self.w @ X
+    def predict(self, transition: Transition, u, dt: float, Q: np.ndarray) -> None:
+        X = transition.f(self.points(), u, dt)
+        self.x = self.wm @ X
         dX = X - self.x
-        self.P = _symmetrize(self._weighted_cov(dX, dX) + Q)
+        self.P = symmetrize(self._cov(dX, dX) + Q)
 
-    def update(self, z: np.ndarray, h, u, R: np.ndarray) -> None:
+    def predicted_measurement(self, measurement: Measurement, u):
+        """Predicted measurement z^, its covariance without R, and the cross covariance Pxz."""
         X = self.points()
-        Z = h(X, u)
-        z_hat = self.w @ Z
-        dX = X - self.x
-        dZ = Z - z_hat
-        Pzz = _symmetrize(self._weighted_cov(dZ, dZ) + R)
-        Pxz = self._weighted_cov(dX, dZ)
-        factor = scipy.linalg.cho_factor(Pzz)
-        K = scipy.linalg.cho_solve(factor, Pxz.T).T
+        Z = measurement.h(X, u)
+        z_hat = self.wm @ Z
+        dX, dZ = X - self.x, Z - z_hat
+        return z_hat, self._cov(dZ, dZ), self._cov(dX, dZ)
+
+    def update(self, z: np.ndarray, measurement: Measurement, u, R: np.ndarray) -> None:
+        z_hat, Pzz, Pxz = self.predicted_measurement(measurement, u)
+        self.correct(z - z_hat, Pzz, Pxz, R)
+
+    def correct(self, y, Pzz, Pxz, R) -> None:
+        S = symmetrize(Pzz + R)
+        K = scipy.linalg.solve(S, Pxz.T, assume_a="pos").T
         H = scipy.linalg.solve(self.P, Pxz, assume_a="pos").T
-        A = np.eye(self.x.size) - K @ H
-        self.y = z - z_hat
-        self.S = Pzz
-        self.K = K
-        self.nis = float(self.y @ scipy.linalg.cho_solve(factor, self.y))
-        self.x = self.x + K @ self.y
-        self.P = _symmetrize(A @ self.P @ A.T + K @ R @ K.T)
+        self.apply_gain(y, S, K, H, R)
 
 
 class CubatureKalmanFilter(SigmaPointFilter):
-    """Third-degree cubature Kalman filter (Arasaratnam & Haykin 2009), 2n points."""
+    """``ckf``: third-degree cubature Kalman filter (Arasaratnam & Haykin 2009), 2n points."""
 
     name = "ckf"
 
     def __init__(self, x0, P0, factorization: str = "cholesky"):
-        xi, w = rules.third_degree_cubature(len(x0))
-        super().__init__(x0, P0, xi, w, factorization)
+        super().__init__(x0, P0, *rules.third_degree_cubature(len(x0)), factorization=factorization)
+
+
+class UnscentedKalmanFilter(SigmaPointFilter):
+    """``ukf``: scaled unscented Kalman filter, 2n + 1 points (alpha 1, beta 2, kappa 3 - n)."""
+
+    name = "ukf"
+
+    def __init__(self, x0, P0, factorization: str = "cholesky"):
+        xi, wm, wc = rules.unscented(len(x0))
+        super().__init__(x0, P0, xi, wm, wc, factorization=factorization)
+
+
+class FifthDegreeCubatureKalmanFilter(SigmaPointFilter):
+    """``fckf``: fifth-degree spherical-radial CKF, 2n^2 + 1 points (SVD-FCKF paper eqs 10-18)."""
+
+    name = "fckf"
+
+    def __init__(self, x0, P0, factorization: str = "cholesky"):
+        super().__init__(x0, P0, *rules.fifth_degree_cubature(len(x0)), factorization=factorization)
+
+
+class GeneralizedFifthDegreeCKF(SigmaPointFilter):
+    """``gfckf``: generalized fifth-degree CKF (DICI-GFCKF paper eqs 22-31)."""
+
+    name = "gfckf"
+
+    def __init__(self, x0, P0, factorization: str = "cholesky"):
+        super().__init__(x0, P0, *rules.generalized_fifth_degree(len(x0)), factorization=factorization)

@@ -5,14 +5,15 @@ This is the model shared by the LMRWEKF (eqs 1-5), MCSCKF and SVD-FCKF (eqs
 y left, z up; a positive road wheel angle ``delta`` turns left; yaw rate ``r``
 is positive counter-clockwise seen from above; sideslip ``beta = atan2(vy, vx)``.
 
-State ``x = (r, beta, vx)`` (the papers' order), input ``u = (delta, ax)`` with
-``ax`` the measured longitudinal acceleration, measurements
+State ``x = (r, beta, vx)`` (the papers' order), input ``u = (delta, ax, theta)``
+with ``ax`` the measured longitudinal acceleration and ``theta`` a scale of both
+cornering stiffnesses (1 unless a dual filter estimates it), measurements
 ``z = (ay, r, vx_wheel)``.
 
 Tire slip angles and forces (cornering stiffnesses ``Cf, Cr`` per axle, positive):
 
-    alpha_f = delta - beta - a r / vx        Fyf = Cf alpha_f
-    alpha_r =       - beta + b r / vx        Fyr = Cr alpha_r
+    alpha_f = delta - beta - a r / vx        Fyf = theta Cf alpha_f
+    alpha_r =       - beta + b r / vx        Fyr = theta Cr alpha_r
 
 Dynamics (body-frame accelerations ``ax = dvx/dt - r vy``, ``ay = dvy/dt + r vx``):
 
@@ -65,9 +66,9 @@ class SingleTrackModel:
         p = self.vehicle
         r, beta = X[:, YAW], X[:, BETA]
         vx = np.maximum(X[:, VX], MIN_DIVISOR_SPEED)
-        delta = u[0]
-        front = p.cornering_stiffness_front * (delta - beta - p.cg_to_front * r / vx)
-        rear = p.cornering_stiffness_rear * (-beta + p.cg_to_rear * r / vx)
+        delta, theta = u[0], u[2]
+        front = theta * p.cornering_stiffness_front * (delta - beta - p.cg_to_front * r / vx)
+        rear = theta * p.cornering_stiffness_rear * (-beta + p.cg_to_rear * r / vx)
         return front, rear
 
     def derivatives(self, X: np.ndarray, u: np.ndarray) -> np.ndarray:
@@ -127,3 +128,76 @@ class SingleTrackModel:
 
     def lateral_velocity(self, x: np.ndarray) -> float:
         return float(x[VX] * np.tan(x[BETA]))
+
+    # Exact Jacobians for the extended Kalman filters (checked against complex-step derivatives in the tests).
+
+    def _force_gradients(self, x, u):
+        """Gradients of Fyf and Fyr with respect to (r, beta, vx), and of both with respect to theta."""
+        p = self.vehicle
+        r, beta, v = x
+        clamped = v < MIN_DIVISOR_SPEED
+        v = max(v, MIN_DIVISOR_SPEED)
+        theta = u[2]
+        cf, cr = theta * p.cornering_stiffness_front, theta * p.cornering_stiffness_rear
+        a, b = p.cg_to_front, p.cg_to_rear
+        d_front = np.array([-cf * a / v, -cf, 0.0 if clamped else cf * a * r / v**2])
+        d_rear = np.array([cr * b / v, -cr, 0.0 if clamped else -cr * b * r / v**2])
+        front, rear = self.axle_forces(x[None, :], u)
+        return d_front, d_rear, float(front[0]), float(rear[0]), v, clamped
+
+    def derivatives_jacobian(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:
+        """d(dx/dt)/dx of :meth:`derivatives` at one state, shape (3, 3)."""
+        p = self.vehicle
+        r, beta, vx = x
+        ax = u[1]
+        d_front, d_rear, front, rear, v, clamped = self._force_gradients(x, u)
+        ay = (front + rear) / p.mass
+        d_ay = (d_front + d_rear) / p.mass
+        c, s = np.cos(beta), np.sin(beta)
+        J = np.empty((3, 3))
+        J[YAW] = (p.cg_to_front * d_front - p.cg_to_rear * d_rear) / p.yaw_inertia
+        numerator = ay * c * c - ax * s * c
+        J[BETA] = d_ay * c * c / v
+        J[BETA, YAW] -= 1.0
+        J[BETA, BETA] += (-2.0 * ay * s * c - ax * np.cos(2.0 * beta)) / v
+        if not clamped:
+            J[BETA, VX] -= numerator / v**2
+        J[VX] = [vx * np.tan(beta), r * vx / c**2, r * np.tan(beta)]
+        return J
+
+    def transition_jacobian(self, x: np.ndarray, u: np.ndarray, dt: float) -> np.ndarray:
+        """d x_{k+1} / d x_k of the RK4 step (chain rule through the four stages)."""
+        eye = np.eye(3)
+        X = x[None, :]
+        k1 = self.derivatives(X, u)
+        J1 = self.derivatives_jacobian(x, u)
+        x2 = (X + 0.5 * dt * k1)[0]
+        J2 = self.derivatives_jacobian(x2, u) @ (eye + 0.5 * dt * J1)
+        k2 = self.derivatives(x2[None, :], u)
+        x3 = (X + 0.5 * dt * k2)[0]
+        J3 = self.derivatives_jacobian(x3, u) @ (eye + 0.5 * dt * J2)
+        k3 = self.derivatives(x3[None, :], u)
+        J4 = self.derivatives_jacobian((X + dt * k3)[0], u) @ (eye + dt * J3)
+        return eye + dt / 6.0 * (J1 + 2.0 * J2 + 2.0 * J3 + J4)
+
+    def transition_low_speed_jacobian(self, x: np.ndarray, u: np.ndarray, dt: float) -> np.ndarray:
+        return np.diag([1.0, np.exp(-dt / LOW_SPEED_BETA_TAU), 1.0])
+
+    def measure_jacobian(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:
+        """d z / d x of :meth:`measure`, shape (3, 3)."""
+        p = self.vehicle
+        r, beta, vx = x
+        delta = u[0]
+        d_front, d_rear, *_ = self._force_gradients(x, u)
+        H = np.zeros((3, 3))
+        H[0] = (d_front + d_rear) / p.mass
+        H[1, YAW] = 1.0
+        sd = np.sin(delta)
+        H[2] = [0.5 * p.cg_to_front * sd, 0.5 * vx * sd / np.cos(beta) ** 2,
+                0.5 * (1.0 + np.cos(delta)) + 0.5 * np.tan(beta) * sd]
+        return H
+
+    def measure_parameter_jacobian(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:
+        """d z / d theta: ay is linear in theta; yaw rate and wheel speed do not depend on it."""
+        front, rear = self.axle_forces(x[None, :], u)
+        return np.array([(front[0] + rear[0]) / (u[2] * self.vehicle.mass), 0.0, 0.0])

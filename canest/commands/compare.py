@@ -1,0 +1,45 @@
+"""canest compare: every filter on the same log, scored against truth, timed."""
+from __future__ import annotations
+
+from canest.commands.common import FORMATTER, add_config, config_from_args
+from canest.compare import format_comparison, parse_filters, plot_comparison, run_filter
+from canest.evaluate import read_table
+
+EPILOG = """examples:
+  canest simulate --maneuver dlc --speed 80 --mu 0.85 -o dlc.log --truth dlc.csv
+  canest compare dlc.log dlc.csv --filters all --plot dlc.png
+  canest compare sine.log sine.csv --filters ckf,fckf,svd-fckf
+
+Each filter gets the config's noise settings and its own default factorization
+and options. RMSE and MAE over valid ticks after --skip seconds; us/step is
+the median wall time of one predict + update on this machine."""
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser("compare", help="run several filters on one log and compare accuracy and speed",
+                              description=__doc__, epilog=EPILOG, formatter_class=FORMATTER)
+    p.add_argument("log", help="input log (any format python-can reads)")
+    p.add_argument("truth", help="truth CSV from canest simulate")
+    add_config(p)
+    p.add_argument("--filters", default="all", help="'all' or a comma-separated list (default all)")
+    p.add_argument("--skip", type=float, default=0.5, help="seconds at the start to leave out (default 0.5)")
+    p.add_argument("--plot", help="PNG with estimate vs truth and the errors of every filter")
+    p.set_defaults(func=run)
+
+
+def run(args) -> int:
+    config = config_from_args(args)
+    names = parse_filters(args.filters)
+    truth = read_table(args.truth)
+    runs = []
+    for name in names:
+        runs.append(run_filter(config, args.log, truth, name, args.skip))
+        print(f"  {name}: done", flush=True)
+    print(format_comparison(runs, f"{args.log} ({config.vehicle.name})"))
+    repaired = [f"{r.name} ({r.repairs})" for r in runs if r.repairs]
+    if repaired:
+        print("covariance repairs: " + ", ".join(repaired))
+    if args.plot:
+        plot_comparison(runs, truth, args.plot)
+        print(f"plot written to {args.plot}")
+    return 0

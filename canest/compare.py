@@ -1,0 +1,98 @@
+"""Run several filters on the same log and compare them as the papers do.
+
+Each filter replays the log through the full pipeline (so each sees exactly
+the decoded, resampled inputs the daemon would), its estimates are scored
+against the truth (:mod:`canest.evaluate`), and the wall time of every
+predict + update is recorded.
+"""
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+import numpy as np
+
+from canest.config import Config
+from canest.evaluate import DISPLAY, score
+from canest.filters import FILTERS
+from canest.replay import replay
+
+STATES = ("vx", "yaw_rate", "beta")
+
+
+@dataclass
+class FilterRun:
+    name: str
+    table: dict  # t and states, as numpy arrays
+    scores: dict  # state -> Score
+    step_us: float  # median microseconds per predict + update
+    repairs: int
+
+
+def with_filter(config: Config, name: str) -> Config:
+    """The config with another filter, its own default factorization and no filter-specific options."""
+    est = dataclasses.replace(config.estimator, filter=name, factorization=None, filter_options={})
+    return dataclasses.replace(config, estimator=est)
+
+
+def run_filter(config: Config, log_path, truth: dict, name: str, skip: float = 0.5) -> FilterRun:
+    estimates = []
+    step_times = []
+
+    def collect(estimate):
+        estimates.append(estimate)
+
+    config = with_filter(config, name) if name != config.estimator.filter else config
+    repairs = replay(config, log_path, progress=False, on_estimate=collect, step_times=step_times)["repairs"]
+    table = {"t": np.array([e.t for e in estimates]), "valid": np.array([e.valid_flags for e in estimates])}
+    for state in (*STATES, "vy"):
+        table[state] = np.array([e.values[state] for e in estimates])
+    scores = {s.state: s for s in score(table, truth, STATES, skip=skip)}
+    return FilterRun(name, table, scores, float(np.median(step_times)) * 1e6 if step_times else float("nan"), repairs)
+
+
+def parse_filters(text: str) -> list:
+    names = list(FILTERS) if text == "all" else [n.strip() for n in text.split(",") if n.strip()]
+    unknown = [n for n in names if n not in FILTERS]
+    if unknown:
+        raise ValueError(f"--filters: unknown filter {unknown[0]!r}; available: all, {', '.join(FILTERS)}")
+    return names
+
+
+def format_comparison(runs, title: str = "") -> str:
+    header = " | ".join(f"{state} [{DISPLAY[state][0]}] RMSE   MAE " for state in STATES)
+    lines = [title] if title else []
+    lines.append(f"{'filter':<9} | {header} | us/step")
+    for run in runs:
+        cells = " | ".join(f"{run.scores[s].rmse:>{len(s) + len(DISPLAY[s][0]) + 8}.4f} {run.scores[s].mae:.4f}"
+                           for s in STATES)
+        lines.append(f"{run.name:<9} | {cells} | {run.step_us:7.1f}")
+    return "\n".join(lines)
+
+
+def plot_comparison(runs, truth: dict, path) -> None:
+    """Estimate vs truth (left) and error (right) for each state, one line per filter."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(len(STATES), 2, figsize=(13, 3 * len(STATES)), sharex=True)
+    for row, state in zip(axes, STATES):
+        unit, factor = DISPLAY[state]
+        row[0].plot(truth["t"], truth[state] * factor, "k-", lw=1.6, label="truth")
+        for i, run in enumerate(runs):
+            t = run.table["t"]
+            estimate = run.table[state] * factor
+            row[0].plot(t, estimate, lw=0.9, color=f"C{i}", label=run.name)
+            row[1].plot(t, estimate - np.interp(t, truth["t"], truth[state]) * factor, lw=0.9, color=f"C{i}")
+        row[0].set_ylabel(f"{state} [{unit}]")
+        row[1].set_ylabel(f"{state} error [{unit}]")
+        for ax in row:
+            ax.grid(True, alpha=0.3)
+    axes[0, 0].legend(fontsize=7, ncol=2)
+    for ax in axes[-1]:
+        ax.set_xlabel("t [s]")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)

@@ -1,0 +1,136 @@
+"""Filters that estimate their own noise statistics from a window of innovations.
+
+Measurement channels (ay, yaw rate, wheel speed) arrive at different rates
+and not every tick, so the statistics are kept per channel: each channel has
+its window of innovations ``r`` and of their predicted variance without noise
+``(H P H^T)_cc``; the estimated R is diagonal. An estimate is used once a
+window is full (before that, the configured R), and never below ``r_floor``
+times the configured value, because the subtraction in eqs 18 and 30 can go
+negative when the model error dominates.
+
+``lmrwekf`` (LMRWEKF paper, steps 1-10, eqs 13-21): an EKF whose R is the
+limited-memory random-weighted estimate over the last N innovations with
+Dirichlet-type weights ``sigma_i = (1-eps)/(1-eps^N) eps^(k-i)`` (newest
+weight largest, sum 1):
+
+    r^  = sum sigma_i r_i,   R^ = sum sigma_i (r_i - r^)^2 - (N-1)/N (H P- H^T)          (eq 18)
+
+``svd-fckf`` (SVD-FCKF paper, eqs 10-30): the fifth-degree CKF with SVD
+factorization, plus innovation-based adaptive noise over the last M steps:
+
+    E = 1/M sum v_j v_j^T                                                     (eq 28)
+    Q_{k+1} = K E K^T                                                          (eq 29)
+    R_{k+1} = E - sum w_i (z_i - z^)(z_i - z^)^T                               (eq 30)
+
+Eq 30 prints ``+``: the innovation covariance is ``Pzz + R``, so R is E
+*minus* the predicted measurement spread (with ``+`` R would grow without
+bound). Q from eq 29 has rank at most m < n; it is added to ``q_floor`` times
+the configured Q so that unmeasured directions keep some process noise.
+"""
+from __future__ import annotations
+
+from collections import deque
+
+import numpy as np
+
+from canest.filters.base import Measurement, Transition
+from canest.filters.ekf import ExtendedKalmanFilter
+from canest.filters.sigma import FifthDegreeCubatureKalmanFilter
+
+
+class ChannelWindows:
+    """Per-channel windows of (innovation, predicted variance) pairs."""
+
+    def __init__(self, length: int, forgetting: float | None = None):
+        if length < 2:
+            raise ValueError(f"window length must be at least 2, got {length}")
+        self.length = length
+        self.windows = {}
+        if forgetting is None:
+            self.weights = np.full(length, 1.0 / length)
+        else:
+            if not 0.0 < forgetting < 1.0:
+                raise ValueError(f"forgetting factor must be in (0, 1), got {forgetting}")
+            ages = np.arange(length - 1, -1, -1)  # oldest first
+            self.weights = (1.0 - forgetting) / (1.0 - forgetting**length) * forgetting**ages
+
+    def push(self, channels, innovations, predicted_variance) -> None:
+        for c, r, v in zip(channels, innovations, predicted_variance):
+            self.windows.setdefault(c, deque(maxlen=self.length)).append((float(r), float(v)))
+
+    def innovations(self, channel):
+        window = self.windows.get(channel, ())
+        return np.array([r for r, _ in window]) if len(window) == self.length else None
+
+    def second_moment(self, channel, centred: bool) -> float | None:
+        """Weighted mean of r^2, or of (r - weighted mean)^2; None until the window is full."""
+        r = self.innovations(channel)
+        if r is None:
+            return None
+        if centred:
+            r = r - self.weights @ r
+        return float(self.weights @ r**2)
+
+    def noise(self, channels, configured: np.ndarray, predicted_variance, centred: bool, bias: float,
+              floor: float) -> np.ndarray:
+        """Diagonal R estimate: second moment minus ``bias`` times the predicted variance, floored."""
+        out = np.diag(configured).copy()
+        for i, c in enumerate(channels):
+            moment = self.second_moment(c, centred)
+            if moment is not None:
+                out[i] = max(moment - bias * predicted_variance[i], floor * out[i])
+        return np.diag(out)
+
+
+class LimitedMemoryRandomWeightedEKF(ExtendedKalmanFilter):
+    name = "lmrwekf"
+
+    def __init__(self, x0, P0, factorization: str = "cholesky", window: int = 30, forgetting: float = 0.97,
+                 r_floor: float = 0.01):
+        super().__init__(x0, P0)
+        if not 0.95 <= forgetting <= 0.995:
+            raise ValueError(f"forgetting must be in [0.95, 0.995] (LMRWEKF paper step 7), got {forgetting}")
+        self.windows = ChannelWindows(window, forgetting)
+        self.r_floor = r_floor
+        self.R_estimate = None
+
+    def update(self, z: np.ndarray, measurement: Measurement, u, R: np.ndarray) -> None:
+        H = measurement.jacobian(self.x, u)
+        predicted = np.diag(H @ self.P @ H.T)
+        y = z - measurement.h(self.x[None, :], u)[0]
+        self.windows.push(measurement.channels, y, predicted)
+        n = self.windows.length
+        self.R_estimate = self.windows.noise(measurement.channels, R, predicted, centred=True, bias=(n - 1) / n,
+                                             floor=self.r_floor)
+        super().update(z, measurement, u, self.R_estimate)
+
+
+class AdaptiveSvdFifthDegreeCKF(FifthDegreeCubatureKalmanFilter):
+    name = "svd-fckf"
+
+    def __init__(self, x0, P0, factorization: str = "svd", window: int = 30, r_floor: float = 0.01,
+                 q_floor: float = 0.1, adapt_q: bool = True):
+        super().__init__(x0, P0, factorization=factorization)
+        self.windows = ChannelWindows(window)
+        self.r_floor = r_floor
+        self.q_floor = q_floor
+        self.adapt_q = adapt_q
+        self.Q_adapted = None
+        self.R_estimate = None
+
+    def predict(self, transition: Transition, u, dt: float, Q: np.ndarray) -> None:
+        if self.Q_adapted is not None:
+            Q = self.q_floor * Q + self.Q_adapted
+        super().predict(transition, u, dt, Q)
+
+    def update(self, z: np.ndarray, measurement: Measurement, u, R: np.ndarray) -> None:
+        z_hat, Pzz, Pxz = self.predicted_measurement(measurement, u)
+        y = z - z_hat
+        predicted = np.diag(Pzz)
+        self.windows.push(measurement.channels, y, predicted)
+        self.R_estimate = self.windows.noise(measurement.channels, R, predicted, centred=False, bias=1.0,
+                                             floor=self.r_floor)
+        self.correct(y, Pzz, Pxz, self.R_estimate)
+        moments = [self.windows.second_moment(c, centred=False) for c in measurement.channels]
+        if self.adapt_q and all(m is not None for m in moments):
+            self.Q_adapted = self.K @ np.diag(moments) @ self.K.T

@@ -1,0 +1,85 @@
+"""What every filter shares: the model interfaces and covariance hygiene.
+
+Filters never see a vehicle. They get a :class:`Transition` and a
+:class:`Measurement` (in the manner of Stone Soup: models apart from the
+predictor and updater), both vectorized over points: ``f(X, u, dt)`` maps
+points of shape (N, n) to (N, n); ``h(X, u)`` maps them to (N, m). Filters that
+linearize use the optional Jacobians; adaptive filters key their noise
+statistics by ``channels`` (which measurements of the model these m are, as
+channels arrive at different rates).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable, Optional
+
+import numpy as np
+import scipy.linalg
+
+EIGEN_FLOOR = 1e-12
+
+
+@dataclass(frozen=True)
+class Transition:
+    f: Callable  # (X (N, n), u, dt) -> (N, n)
+    jacobian: Optional[Callable] = None  # (x (n,), u, dt) -> (n, n)
+
+
+@dataclass(frozen=True)
+class Measurement:
+    h: Callable  # (X (N, n), u) -> (N, m)
+    jacobian: Optional[Callable] = None  # (x (n,), u) -> (m, n)
+    channels: tuple = ()  # model measurement channel of each of the m rows
+    parameter_jacobian: Optional[Callable] = None  # (x, u) -> (m,): d h / d(model parameter), for dual filters
+
+
+def symmetrize(P: np.ndarray) -> np.ndarray:
+    return 0.5 * (P + P.T)
+
+
+def svd_root(P: np.ndarray) -> np.ndarray:
+    """``U diag(sqrt(s))`` from ``P = U diag(s) U^T``: a square root of any symmetric PSD matrix (DCKF eqs 16-19)."""
+    U, s, _ = np.linalg.svd(symmetrize(P), hermitian=True)
+    return U * np.sqrt(np.maximum(s, 0.0))
+
+
+class GaussianFilter:
+    """State ``x``, covariance ``P``; after an update the innovation ``y``, its covariance ``S``,
+    the gain ``K`` and the normalized innovation squared ``nis``; ``repairs`` counts covariance repairs."""
+
+    name = "gaussian"
+
+    def __init__(self, x0, P0):
+        self.repairs = 0
+        self.x = np.array(x0, dtype=float)
+        self.P = np.array(P0, dtype=float)
+        self.y = self.S = self.K = None
+        self.nis = 0.0
+
+    def repair(self, P: np.ndarray) -> np.ndarray:
+        """Nearest symmetric matrix with eigenvalues >= EIGEN_FLOOR * max(1, largest); counted."""
+        self.repairs += 1
+        P = np.nan_to_num(symmetrize(P), nan=0.0, posinf=0.0, neginf=0.0)
+        values, vectors = np.linalg.eigh(P)
+        floor = EIGEN_FLOOR * max(float(values.max()), 1.0)
+        return symmetrize((vectors * np.maximum(values, floor)) @ vectors.T)
+
+    def cholesky(self, P: np.ndarray) -> np.ndarray:
+        """Lower Cholesky factor of P; a P that is not positive definite is repaired first."""
+        try:
+            return np.linalg.cholesky(P)
+        except np.linalg.LinAlgError:
+            self.P = self.repair(P)
+            return np.linalg.cholesky(self.P)
+
+    def apply_gain(self, y: np.ndarray, S: np.ndarray, K: np.ndarray, H: np.ndarray, R: np.ndarray) -> None:
+        """x += K y and the Joseph-form covariance update ``(I - K H) P (I - K H)^T + K R K^T``.
+
+        A congruence of a positive definite matrix plus a positive semidefinite
+        one: symmetric positive definite by construction (then symmetrized).
+        """
+        A = np.eye(self.x.size) - K @ H
+        self.y, self.S, self.K = y, S, K
+        self.nis = float(y @ scipy.linalg.solve(S, y, assume_a="pos"))
+        self.x = self.x + K @ y
+        self.P = symmetrize(A @ self.P @ A.T + K @ R @ K.T)

@@ -1,0 +1,81 @@
+"""Extended Kalman filters: ``ekf`` and the dual ``dekf``.
+
+``ekf`` (the baseline of the LMRWEKF and MCSCKF papers):
+
+    x- = f(x, u, dt),  P- = F P F^T + Q,  F = df/dx at x      (exact Jacobian from the model)
+    K = P- H^T (H P- H^T + R)^-1,  H = dh/dx at x-
+    x = x- + K (z - h(x-)),  P = (I - K H) P- (I - K H)^T + K R K^T   (Joseph form)
+
+``dekf`` (the comparison of the LMRWEKF paper, after Wenzel et al. 2006 and Wan
+& Nelson's dual estimation): a state EKF and a parameter EKF run side by side
+and exchange estimates each step. The parameter is a common scale ``theta`` of
+both axles' cornering stiffnesses: the one vehicle parameter that changes in
+service (tire wear, temperature, inflation, load) and that dominates the
+lateral model's error; it rides in the model input ``u[2]``. The parameter
+filter is a random walk ``theta+ = theta`` with ``q_theta`` per second,
+updated with the same measurements through ``C = dh/dtheta`` at the state
+filter's posterior (the decoupled form: the state's own dependence on theta
+through past steps is neglected), and clipped to ``THETA_BOUNDS``.
+"""
+from __future__ import annotations
+
+import numpy as np
+import scipy.linalg
+
+from canest.filters.base import GaussianFilter, Measurement, Transition, symmetrize
+
+PARAMETER_INDEX = 2  # u[2]: cornering stiffness scale
+THETA_BOUNDS = (0.3, 2.0)
+
+
+class ExtendedKalmanFilter(GaussianFilter):
+    name = "ekf"
+
+    def __init__(self, x0, P0, factorization: str = "cholesky"):
+        super().__init__(x0, P0)
+
+    def predict(self, transition: Transition, u, dt: float, Q: np.ndarray) -> None:
+        F = transition.jacobian(self.x, u, dt)
+        self.x = transition.f(self.x[None, :], u, dt)[0]
+        self.P = symmetrize(F @ self.P @ F.T + Q)
+
+    def innovation(self, z, measurement: Measurement, u, R):
+        """Innovation y, its covariance S and the Jacobian H at the prior."""
+        H = measurement.jacobian(self.x, u)
+        y = z - measurement.h(self.x[None, :], u)[0]
+        return y, symmetrize(H @ self.P @ H.T + R), H
+
+    def update(self, z: np.ndarray, measurement: Measurement, u, R: np.ndarray) -> None:
+        y, S, H = self.innovation(z, measurement, u, R)
+        K = scipy.linalg.solve(S, H @ self.P, assume_a="pos").T
+        self.apply_gain(y, S, K, H, R)
+
+
+class DualExtendedKalmanFilter(ExtendedKalmanFilter):
+    name = "dekf"
+
+    def __init__(self, x0, P0, factorization: str = "cholesky", theta0: float = 1.0, theta_std: float = 0.1,
+                 theta_noise: float = 0.02):
+        super().__init__(x0, P0)
+        self.theta = float(theta0)
+        self.theta_var = theta_std**2
+        self.theta_q = theta_noise**2
+
+    def _with_theta(self, u):
+        u = np.array(u, dtype=float)
+        u[PARAMETER_INDEX] = self.theta
+        return u
+
+    def predict(self, transition: Transition, u, dt: float, Q: np.ndarray) -> None:
+        super().predict(transition, self._with_theta(u), dt, Q)
+        self.theta_var += self.theta_q * dt
+
+    def update(self, z: np.ndarray, measurement: Measurement, u, R: np.ndarray) -> None:
+        u = self._with_theta(u)
+        super().update(z, measurement, u, R)
+        C = measurement.parameter_jacobian(self.x, u)
+        residual = z - measurement.h(self.x[None, :], u)[0]
+        S = self.theta_var * np.outer(C, C) + R
+        gain = self.theta_var * scipy.linalg.solve(S, C, assume_a="pos")
+        self.theta = float(np.clip(self.theta + gain @ residual, *THETA_BOUNDS))
+        self.theta_var = max(self.theta_var * (1.0 - gain @ C), 1e-12)
