@@ -68,3 +68,24 @@ def test_run_on_a_bus_that_does_not_exist_fails_cleanly():
     result = canest("run", "--interface", "socketcan", "--channel", "nosuchcan9", check=False)
     assert result.returncode == 2
     assert "cannot open input bus socketcan:nosuchcan9" in result.stderr
+
+
+def test_compare_every_filter_on_one_log(dlc_run, tmp_path):
+    log, truth, _ = dlc_run
+    out = canest("compare", log, truth, "--filters", "all", "--plot", tmp_path / "compare.png").stdout
+    from canest.filters import FILTERS
+
+    table = [line for line in out.splitlines() if "|" in line and not line.startswith("filter")]
+    assert [line.split("|")[0].strip() for line in table] == list(FILTERS)
+    for line in table:
+        cells = line.split("|")
+        vx_rmse, yaw_rmse, beta_rmse = (float(cells[i].split()[0]) for i in (1, 2, 3))
+        assert vx_rmse < 0.1 and yaw_rmse < 0.3 and beta_rmse < 0.5, line
+        assert float(cells[4]) > 0
+    assert (tmp_path / "compare.png").stat().st_size > 20000
+
+
+def test_compare_rejects_unknown_filter(dlc_run):
+    log, truth, _ = dlc_run
+    result = canest("compare", log, truth, "--filters", "ckf,kalman9", check=False)
+    assert result.returncode == 2 and "unknown filter 'kalman9'" in result.stderr

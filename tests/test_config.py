@@ -101,3 +101,18 @@ def test_production_dbc_through_config_only():
     assert config.signals["wheel_speed_rl"].factor == pytest.approx(1 / 3.6 / config.vehicle.wheel_radius)
     assert config.signals["wheel_speed_rl"].multiplexer_value == 1
     assert "motor_torque_fl" not in config.signals
+
+
+def test_every_filter_is_selectable_by_config(tmp_path):
+    from canest.filters import FILTERS
+
+    for name in FILTERS:
+        path = write_variant(tmp_path, lambda d: d["estimator"].update(filter=name, factorization="svd"))
+        assert load_config(path).estimator.filter == name
+
+
+def test_wrong_filter_option_names_the_key(tmp_path):
+    path = write_variant(tmp_path, lambda d: d["estimator"].update(filter="lmrwekf", filter_options={"windw": 3}))
+    assert re.search(r":\d+: estimator\.filter_options: lmrwekf: .*windw", error_of(path))
+    path = write_variant(tmp_path, lambda d: d["estimator"].update(filter="lmrwekf", filter_options={"forgetting": 0.5}))
+    assert "forgetting must be in [0.95, 0.995]" in error_of(path)

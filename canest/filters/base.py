@@ -14,7 +14,6 @@ from dataclasses import dataclass
 from typing import Callable, Optional
 
 import numpy as np
-import scipy.linalg
 
 EIGEN_FLOOR = 1e-12
 
@@ -80,6 +79,6 @@ class GaussianFilter:
         """
         A = np.eye(self.x.size) - K @ H
         self.y, self.S, self.K = y, S, K
-        self.nis = float(y @ scipy.linalg.solve(S, y, assume_a="pos"))
+        self.nis = float(y @ np.linalg.solve(S, y))
         self.x = self.x + K @ y
         self.P = symmetrize(A @ self.P @ A.T + K @ R @ K.T)

@@ -47,7 +47,7 @@ class ExtendedKalmanFilter(GaussianFilter):
 
     def update(self, z: np.ndarray, measurement: Measurement, u, R: np.ndarray) -> None:
         y, S, H = self.innovation(z, measurement, u, R)
-        K = scipy.linalg.solve(S, H @ self.P, assume_a="pos").T
+        K = np.linalg.solve(S, H @ self.P).T
         self.apply_gain(y, S, K, H, R)
 
 

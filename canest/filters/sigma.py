@@ -24,7 +24,6 @@ it by clipping eigenvalues and counts it in ``repairs``.
 from __future__ import annotations
 
 import numpy as np
-import scipy.linalg
 
 from canest.filters import rules
 from canest.filters.base import GaussianFilter, Measurement, Transition, svd_root, symmetrize
@@ -71,8 +70,8 @@ class SigmaPointFilter(GaussianFilter):
 
     def correct(self, y, Pzz, Pxz, R) -> None:
         S = symmetrize(Pzz + R)
-        K = scipy.linalg.solve(S, Pxz.T, assume_a="pos").T
-        H = scipy.linalg.solve(self.P, Pxz, assume_a="pos").T
+        K = np.linalg.solve(S, Pxz.T).T
+        H = np.linalg.solve(self.P, Pxz).T
         self.apply_gain(y, S, K, H, R)
 
 

@@ -60,6 +60,12 @@ class SingleTrackModel:
 
     def __init__(self, vehicle: VehicleParams):
         self.vehicle = vehicle
+        cf, cr = vehicle.cornering_stiffness_front, vehicle.cornering_stiffness_rear
+        a, b, m, iz = vehicle.cg_to_front, vehicle.cg_to_rear, vehicle.mass, vehicle.yaw_inertia
+        # Coefficients of (ay, dr/dt) per unit of beta, r/vx and delta, at theta = 1.
+        self._per_beta = np.array([-(cf + cr) / m, -(a * cf - b * cr) / iz])
+        self._per_yaw = np.array([(b * cr - a * cf) / m, -(a * a * cf + b * b * cr) / iz])
+        self._per_delta = np.array([cf / m, a * cf / iz])
 
     def axle_forces(self, X: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Front and rear axle lateral forces (N) for points ``X`` of shape (N, 3)."""
@@ -71,19 +77,29 @@ class SingleTrackModel:
         rear = theta * p.cornering_stiffness_rear * (-beta + p.cg_to_rear * r / vx)
         return front, rear
 
+    def _lateral(self, X: np.ndarray, u: np.ndarray):
+        """``ay`` and ``dr/dt`` as columns of an (N, 2) array, and ``1/vx``.
+
+        Both are affine in ``beta`` and ``r/vx`` (eqs 1 and 4), so one
+        broadcast product per term computes them for every point at once.
+        """
+        inv_v = 1.0 / np.maximum(X[:, VX:], MIN_DIVISOR_SPEED)
+        theta = u[2]
+        lateral = X[:, BETA:VX] * (theta * self._per_beta)
+        lateral += (X[:, YAW:BETA] * inv_v) * (theta * self._per_yaw)
+        lateral += (theta * u[0]) * self._per_delta
+        return lateral, inv_v[:, 0]
+
     def derivatives(self, X: np.ndarray, u: np.ndarray) -> np.ndarray:
         """Continuous-time dx/dt of eqs (1)-(3), shape (N, 3)."""
-        p = self.vehicle
-        front, rear = self.axle_forces(X, u)
+        lateral, inv_v = self._lateral(X, u)
         r, beta = X[:, YAW], X[:, BETA]
-        vx = np.maximum(X[:, VX], MIN_DIVISOR_SPEED)
         ax = u[1]
-        ay = (front + rear) / p.mass
-        cos_beta = np.cos(beta)
+        sin_beta, cos_beta = np.sin(beta), np.cos(beta)
         out = np.empty_like(X)
-        out[:, YAW] = (p.cg_to_front * front - p.cg_to_rear * rear) / p.yaw_inertia
-        out[:, BETA] = (ay * cos_beta - ax * np.sin(beta)) * cos_beta / vx - r
-        out[:, VX] = ax + r * X[:, VX] * np.tan(beta)
+        out[:, YAW] = lateral[:, 1]
+        out[:, BETA] = (lateral[:, 0] * cos_beta - ax * sin_beta) * cos_beta * inv_v - r
+        out[:, VX] = ax + r * X[:, VX] * sin_beta / cos_beta
         return out
 
     def transition(self, X: np.ndarray, u: np.ndarray, dt: float) -> np.ndarray:
@@ -116,12 +132,12 @@ class SingleTrackModel:
         yaw terms cancel in the mean.
         """
         p = self.vehicle
-        front, rear = self.axle_forces(X, u)
+        lateral, _ = self._lateral(X, u)
         delta = u[0]
         r, vx = X[:, YAW], X[:, VX]
         vy = vx * np.tan(X[:, BETA])
         out = np.empty_like(X)
-        out[:, 0] = (front + rear) / p.mass
+        out[:, 0] = lateral[:, 0]
         out[:, 1] = r
         out[:, 2] = 0.5 * vx * (1.0 + np.cos(delta)) + 0.5 * (vy + p.cg_to_front * r) * np.sin(delta)
         return out
