@@ -75,38 +75,38 @@ class SigmaPointFilter(GaussianFilter):
         self.apply_gain(y, S, K, H, R)
 
 
-class CubatureKalmanFilter(SigmaPointFilter):
+class RuleFilter(SigmaPointFilter):
+    """A sigma-point filter defined by its point rule alone (``rule(n) -> (xi, w_mean[, w_cov])``)."""
+
+    rule = None
+
+    def __init__(self, x0, P0, factorization: str = "cholesky"):
+        super().__init__(x0, P0, *type(self).rule(len(x0)), factorization=factorization)
+
+
+class CubatureKalmanFilter(RuleFilter):
     """``ckf``: third-degree cubature Kalman filter (Arasaratnam & Haykin 2009), 2n points."""
 
     name = "ckf"
-
-    def __init__(self, x0, P0, factorization: str = "cholesky"):
-        super().__init__(x0, P0, *rules.third_degree_cubature(len(x0)), factorization=factorization)
+    rule = staticmethod(rules.third_degree_cubature)
 
 
-class UnscentedKalmanFilter(SigmaPointFilter):
+class UnscentedKalmanFilter(RuleFilter):
     """``ukf``: scaled unscented Kalman filter, 2n + 1 points (alpha 1, beta 2, kappa 3 - n)."""
 
     name = "ukf"
-
-    def __init__(self, x0, P0, factorization: str = "cholesky"):
-        xi, wm, wc = rules.unscented(len(x0))
-        super().__init__(x0, P0, xi, wm, wc, factorization=factorization)
+    rule = staticmethod(rules.unscented)
 
 
-class FifthDegreeCubatureKalmanFilter(SigmaPointFilter):
+class FifthDegreeCubatureKalmanFilter(RuleFilter):
     """``fckf``: fifth-degree spherical-radial CKF, 2n^2 + 1 points (SVD-FCKF paper eqs 10-18)."""
 
     name = "fckf"
-
-    def __init__(self, x0, P0, factorization: str = "cholesky"):
-        super().__init__(x0, P0, *rules.fifth_degree_cubature(len(x0)), factorization=factorization)
+    rule = staticmethod(rules.fifth_degree_cubature)
 
 
-class GeneralizedFifthDegreeCKF(SigmaPointFilter):
+class GeneralizedFifthDegreeCKF(RuleFilter):
     """``gfckf``: generalized fifth-degree CKF (DICI-GFCKF paper eqs 22-31)."""
 
     name = "gfckf"
-
-    def __init__(self, x0, P0, factorization: str = "cholesky"):
-        super().__init__(x0, P0, *rules.generalized_fifth_degree(len(x0)), factorization=factorization)
+    rule = staticmethod(rules.generalized_fifth_degree)

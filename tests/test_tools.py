@@ -1,0 +1,19 @@
+"""Smoke runs of the benchmark and evaluation tools, so they do not rot."""
+import subprocess
+import sys
+
+from canest.filters import FILTERS
+from tests.conftest import ROOT
+
+
+def run_tool(*args):
+    result = subprocess.run([sys.executable, *map(str, args)], capture_output=True, text=True, timeout=600)
+    assert result.returncode == 0, result.stderr
+    return result.stdout
+
+
+def test_filter_benchmark_prints_every_filter():
+    out = run_tool(ROOT / "tools" / "bench" / "filters.py", "--steps", "30")
+    rows = {line.split()[0]: line.split() for line in out.splitlines()[1:] if line and line.split()[0] in FILTERS}
+    assert set(rows) == set(FILTERS)
+    assert all(float(row[1]) > 0 for row in rows.values())
