@@ -8,7 +8,7 @@ import sys
 from canest import __version__
 from canest.commands import check, compare, demo, evaluate, replay, run, simulate
 from canest.config import ConfigError
-from canest.service import BusOpenError
+from canest.buslink import BusOpenError
 
 DESCRIPTION = """canest: online vehicle state estimation on CAN.
 

@@ -42,8 +42,18 @@ class _MessagePlan:
         self.counter_modulus = 2 ** self.signal_by_name[self.checks.counter].length if self.checks.counter else 0
 
 
+MAX_COUNTER_DELTA = 3  # accept up to two lost frames between consecutive counters (AUTOSAR E2E MaxDeltaCounter)
+
+
 class InputDecoder:
-    """Decode mapped frames into ``[(canonical, si_value), ...]``; count what is not used."""
+    """Decode mapped frames into ``[(canonical, si_value), ...]``; count what is not used.
+
+    Counter rule (as AUTOSAR E2E profile 1): the same counter again is rejected
+    (a frozen sender); an increment of 2 or 3 is accepted and counted as lost
+    frames; a larger jump is rejected (``counter_sequence``) and the new
+    value becomes the reference, so a sender that restarted is followed from
+    its next frame on.
+    """
 
     def __init__(self, config: Config):
         self.database = load_database(config.input_dbc, f"{config.path}: input.dbc")
@@ -95,11 +105,15 @@ class InputDecoder:
             return self._reject("invalid_flag")
         if checks.counter:
             counter = int(values[checks.counter])
-            if counter == plan.last_counter:
-                return self._reject("counter_repeated")
-            if plan.last_counter is not None and counter != (plan.last_counter + 1) % plan.counter_modulus:
-                self.counts["counter_jumps"] += 1
-            plan.last_counter = counter
+            last, plan.last_counter = plan.last_counter, counter
+            if last is not None:
+                delta = (counter - last) % plan.counter_modulus
+                if delta == 0:
+                    return self._reject("counter_repeated")
+                if delta > MAX_COUNTER_DELTA:
+                    return self._reject("counter_sequence")
+                if delta > 1:
+                    self.counts["counter_jumps"] += 1
         out = []
         for spec in plan.specs:
             if spec.signal not in values:

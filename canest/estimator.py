@@ -11,12 +11,22 @@ Per tick (:meth:`Estimator.step`):
 5. update with the measurements that are fresh: ay (normal mode only), yaw
    rate, and the wheel-speed speed ``vx_wheel = R mean(w)``;
 6. publish values, standard deviations and validity. A non-finite state or
-   covariance resets the filter (counted in ``resets``).
+   covariance, or a diverging filter, resets it (counted in ``resets``).
+
+Divergence test: the normalized innovation squared (NIS) of a consistent
+filter averages the number of measurements (here 1-3). Over the last
+``DIVERGENCE_WINDOW`` updates its mean stays below 3 on every maneuver the
+simulator drives within the tires' grip (measured: 0.3 DLC, 1.3 sine 80 km/h,
+2.9 sine on mu 0.3) and reaches hundreds when the car spins and no
+single-track model can follow. Above ``DIVERGENCE_NIS`` the filter is reset
+and sideslip stays invalid (mode ``degraded``) for ``DIVERGENCE_HOLD`` s.
 """
 from __future__ import annotations
 
+import logging
 import math
 import time
+from collections import deque
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -26,10 +36,15 @@ from canest.filters import FILTERS, Measurement, Transition
 from canest.models.single_track import BETA, VX, YAW, SingleTrackModel
 from canest.signals import INPUT_GROUPS, WHEELS
 
+log = logging.getLogger("canest.estimator")
+
 OUTPUT_STATES = ("vx", "vy", "beta", "yaw_rate")
 VALID_BITS = ("vx", "vy", "beta", "yaw_rate", "forces", "friction")
 MODES = ("initializing", "normal", "low_speed", "degraded", "no_input")
 WHEEL_SPEEDS = tuple(f"wheel_speed_{w}" for w in WHEELS)
+DIVERGENCE_WINDOW = 50  # updates
+DIVERGENCE_NIS = 30.0
+DIVERGENCE_HOLD = 1.0  # s
 
 
 @dataclass
@@ -94,6 +109,9 @@ class Estimator:
         self.low_speed = False
         self.resets = 0
         self.step_times = None  # set to a list to record the seconds of each predict + update
+        self.last_mode = "initializing"
+        self.recent_nis = deque(maxlen=DIVERGENCE_WINDOW)
+        self.suspect_until = -math.inf
         self.transitions = {
             False: Transition(self.model.transition, self.model.transition_jacobian),
             True: Transition(self.model.transition_low_speed, self.model.transition_low_speed_jacobian),
@@ -102,6 +120,16 @@ class Estimator:
     def reset(self) -> None:
         """Forget the state: the next tick with inputs initializes a new filter."""
         self.filter = None
+        self.recent_nis.clear()
+
+    def _diverged(self, t: float) -> bool:
+        self.recent_nis.append(self.filter.nis)
+        if len(self.recent_nis) < DIVERGENCE_WINDOW or np.mean(self.recent_nis) <= DIVERGENCE_NIS:
+            return False
+        log.warning("filter diverged (mean NIS %.0f over %d updates): reset", np.mean(self.recent_nis),
+                    DIVERGENCE_WINDOW)
+        self.suspect_until = t + DIVERGENCE_HOLD
+        return True
 
     def _inputs(self, t: float) -> _Inputs:
         sample = self.resampler.sample(t)
@@ -164,6 +192,9 @@ class Estimator:
     def step(self, t: float) -> Estimate:
         inputs = self._inputs(t)
         missing = self._missing(inputs)
+        if not any(inputs.has(name) for name in inputs.values):
+            self.reset()  # nothing to estimate from: restart cleanly when inputs return, do not extrapolate
+            return self._publish(t, "no_input", missing, inputs)
         if self.filter is None and not self._start(inputs):
             return self._publish(t, "initializing", missing, inputs)
         self._choose_mode()
@@ -183,23 +214,27 @@ class Estimator:
             ages = np.array([inputs.ages.get("ay", 0.0), inputs.ages["yaw_rate"],
                              float(np.mean([inputs.ages[w] for w in WHEEL_SPEEDS]))])
             self.filter.update(z, self._measurement(mask, ages), u, np.diag(self.r_std[mask] ** 2))
+            diverged = self._diverged(t)
+        else:
+            diverged = False
         if self.step_times is not None:
             self.step_times.append(time.perf_counter() - started)
-        if not (np.all(np.isfinite(self.filter.x)) and np.all(np.isfinite(self.filter.P))):
+        if diverged or not (np.all(np.isfinite(self.filter.x)) and np.all(np.isfinite(self.filter.P))):
             self.resets += 1
             self.reset()
+            self._start(inputs)  # restart from the measurements at once, so vx and yaw rate stay published
             return self._publish(t, "degraded", missing, inputs)
-        if not inputs.has("ax", "ay", "yaw_rate") and not inputs.has(*WHEEL_SPEEDS):
-            mode = "no_input"
-        elif self.low_speed:
+        lateral_ok = lateral_ok and t >= self.suspect_until
+        if self.low_speed:
             mode = "low_speed"
-        elif missing and not lateral_ok:
+        elif not lateral_ok:
             mode = "degraded"
         else:
             mode = "normal"
         return self._publish(t, mode, missing, inputs, lateral_ok)
 
     def _publish(self, t, mode, missing, inputs: _Inputs, lateral_ok: bool = False) -> Estimate:
+        self.last_mode = mode
         if self.filter is None:
             values = {name: math.nan for name in OUTPUT_STATES}
             values.update({f"{name}_std": math.nan for name in OUTPUT_STATES})

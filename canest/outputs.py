@@ -102,6 +102,7 @@ class EstimateEncoder:
             "Mode": self.mode_ids[estimate.mode],
             "ValidFlags": estimate.valid_flags,
             "MissingInputs": estimate.missing_mask,
+            "ResetCount": min(estimate.resets, 255),
             "InnovationNis": _clamp(status.signals["InnovationNis"], estimate.nis),
         }, estimate.t, self.channel))
         return frames

@@ -3,9 +3,23 @@
 Ticks follow the receive timestamps of the frames (the kernel's on SocketCAN),
 exactly as replay follows log timestamps, so a log played onto a bus gives the
 estimates an offline replay of it gives. When the bus is idle, ticks still
-happen ``IDLE_MARGIN`` behind the wall clock so stale inputs are noticed.
-Sending never blocks the loop: a frame the output bus refuses (``ENOBUFS``,
-interface down) is dropped and counted.
+happen ``IDLE_MARGIN`` behind the wall clock so stale inputs are noticed and
+the outputs lose their validity bits.
+
+What the loop guarantees:
+
+- it never blocks on output: a frame the output bus refuses is dropped and
+  counted (:mod:`canest.buslink`), and a lost bus is reopened with backoff;
+- it transmits at most one set of estimate frames per loop pass, the newest:
+  when several ticks complete at once (after a stall) the older ones are
+  logged to the CSV but not sent (``superseded``), so the output never bursts
+  above the DBC cycle rate whatever arrives;
+- systemd: READY=1 once the buses are open and the first valid estimate is
+  out, WATCHDOG=1 from the loop itself (a hung loop is restarted, an idle bus
+  is not), STATUS= with input rate, tick rate and mode;
+- SIGTERM/SIGINT stop it cleanly; SIGHUP reloads the config (buses are
+  reopened only if their settings changed; a broken config is logged and the
+  running one kept); SIGUSR1 logs the status now.
 """
 from __future__ import annotations
 
@@ -13,41 +27,44 @@ import logging
 import signal
 import threading
 import time
+from collections import Counter, deque
 
-import can
+import numpy as np
 
-from canest.config import Config
-from canest.pipeline import Pipeline
+from canest.buslink import BusLink
+from canest.config import Config, ConfigError
+from canest.notify import Notifier
+from canest.pipeline import Pipeline, format_summary
 
 log = logging.getLogger("canest.service")
 
 IDLE_MARGIN = 0.05  # s behind the wall clock before an idle tick is run
 STATUS_EVERY = 10.0  # s between status log lines
-
-
-class BusOpenError(RuntimeError):
-    pass
-
-
-def open_bus(kwargs: dict, role: str, **extra) -> can.BusABC:
-    try:
-        return can.Bus(**kwargs, **extra)
-    except (can.CanError, OSError, ValueError, ImportError) as exc:
-        raise BusOpenError(f"cannot open {role} bus {kwargs.get('interface')}:{kwargs.get('channel')}: {exc}") from None
+NOTIFY_STATUS_EVERY = 1.0  # s between STATUS= updates to systemd
+LATENCY_WINDOW = 10_000  # send latencies kept for percentiles, cleared at every status line
 
 
 class Service:
-    """Run the pipeline on live buses until :meth:`stop` (or SIGINT/SIGTERM) is called."""
+    """Run the pipeline on live buses until :meth:`stop` (or SIGINT/SIGTERM) is called.
 
-    def __init__(self, config: Config, on_estimate=None, csv_writer=None):
+    ``reload_config`` (no arguments, returns a Config) is called on SIGHUP.
+    """
+
+    def __init__(self, config: Config, on_estimate=None, csv_writer=None, reload_config=None, notifier=None):
         self.config = config
         self.pipeline = Pipeline(config, output_channel=config.output_bus.channel)
         self.on_estimate = on_estimate
         self.csv_writer = csv_writer
+        self.reload_config = reload_config
+        self.notifier = notifier or Notifier()
         self.stopping = threading.Event()
-        self.sent = 0
-        self.dropped = 0
-        self.ticks = 0
+        self.reload_requested = threading.Event()
+        self.status_requested = threading.Event()
+        self.counts = Counter(ticks=0, sent=0, send_dropped=0, superseded=0)
+        self.earlier = Counter()  # summaries of pipelines replaced by a reload
+        self.latency = deque(maxlen=LATENCY_WINDOW)
+        self.ready = False
+        self.inputs = self.outputs = None
 
     def stop(self, *_args) -> None:
         self.stopping.set()
@@ -55,46 +72,130 @@ class Service:
     def install_signal_handlers(self) -> None:
         signal.signal(signal.SIGTERM, self.stop)
         signal.signal(signal.SIGINT, self.stop)
+        signal.signal(signal.SIGHUP, lambda *_: self.reload_requested.set())
+        signal.signal(signal.SIGUSR1, lambda *_: self.status_requested.set())
 
-    def _send(self, bus: can.BusABC, estimates) -> None:
+    def _open(self) -> None:
+        input_kwargs = self.config.input_bus.kwargs()
+        output_kwargs = self.config.output_bus.kwargs()
+        self.inputs = BusLink(input_kwargs, "input", self.counts, can_filters=self.pipeline.decoder.can_filters())
+        self.outputs = self.inputs if output_kwargs == input_kwargs else BusLink(output_kwargs, "output", self.counts)
+
+    def _close(self) -> None:
+        for link in {id(self.inputs): self.inputs, id(self.outputs): self.outputs}.values():
+            if link is not None:
+                link.close()
+
+    def _publish(self, estimates) -> None:
         for estimate in estimates:
-            self.ticks += 1
+            self.counts["ticks"] += 1
             if self.csv_writer:
                 self.csv_writer.write(estimate)
             if self.on_estimate:
                 self.on_estimate(estimate)
-            for frame in self.pipeline.encoder.encode(estimate):
-                try:
-                    bus.send(frame, timeout=0)
-                    self.sent += 1
-                except can.CanError:
-                    self.dropped += 1
+        self.counts["superseded"] += len(estimates) - 1
+        newest = estimates[-1]
+        for frame in self.pipeline.encoder.encode(newest):
+            self.counts["sent" if self.outputs.send(frame) else "send_dropped"] += 1
+        self.latency.append(time.time() - newest.t)
+        if not self.ready and any(newest.valid.values()):
+            self.ready = True
+            self.notifier.notify(READY=1, STATUS="estimating")
+            log.info("first valid estimate sent: ready")
 
     def run(self) -> dict:
         """Open the buses and loop; returns the frame summary when stopped."""
-        input_kwargs = self.config.input_bus.kwargs()
-        output_kwargs = self.config.output_bus.kwargs()
-        bus_in = open_bus(input_kwargs, "input", can_filters=self.pipeline.decoder.can_filters())
-        bus_out = bus_in if output_kwargs == input_kwargs else open_bus(output_kwargs, "output")
+        self._open()
         log.info("estimating: %s -> %s, filter %s at %.0f Hz", self.config.input_bus.channel,
                  self.config.output_bus.channel, self.config.estimator.filter, self.config.estimator.rate_hz)
         dt = 1.0 / self.config.estimator.rate_hz
-        next_status = time.monotonic() + STATUS_EVERY
+        clock = _Schedule(self.notifier.watchdog_interval)
         try:
             while not self.stopping.is_set():
-                msg = bus_in.recv(timeout=dt)
+                msg = self.inputs.recv(dt)
                 if msg is not None:
-                    self._send(bus_out, self.pipeline.feed(msg))
+                    estimates = self.pipeline.feed(msg)
                 else:
-                    self._send(bus_out, self.pipeline.advance(time.time() - IDLE_MARGIN))
-                if time.monotonic() >= next_status:
-                    next_status += STATUS_EVERY
-                    log.info("status: %s", self.summary())
+                    estimates = self.pipeline.advance(time.time() - IDLE_MARGIN)
+                if estimates:
+                    self._publish(estimates)
+                self._housekeeping(clock)
         finally:
-            bus_in.shutdown()
-            if bus_out is not bus_in:
-                bus_out.shutdown()
+            self._close()
+            self.notifier.notify(STOPPING=1)
         return self.summary()
 
+    def _housekeeping(self, clock: "_Schedule") -> None:
+        now = time.monotonic()
+        if clock.due("watchdog", now):
+            self.notifier.notify(WATCHDOG=1)
+        if clock.due("notify_status", now):
+            self.notifier.notify(STATUS=self._status_line(clock.rates(self.summary(), now)))
+        if clock.due("log_status", now) or self.status_requested.is_set():
+            self.status_requested.clear()
+            log.info("status: %s | latency %s", format_summary(self.summary()), self.latency_text())
+            self.latency.clear()  # each status line reports the latency since the previous one
+        if self.reload_requested.is_set():
+            self.reload_requested.clear()
+            self._reload()
+
+    def _status_line(self, rates) -> str:
+        mode = self.pipeline.estimator.last_mode
+        return f"mode {mode}, input {rates['frames']:.0f} frames/s, {rates['ticks']:.0f} ticks/s"
+
+    def latency_text(self) -> str:
+        if not self.latency:
+            return "-"
+        ms = np.array(self.latency) * 1e3
+        return f"p50 {np.median(ms):.2f} ms, p99 {np.percentile(ms, 99):.2f} ms, max {ms.max():.2f} ms"
+
+    def _reload(self) -> None:
+        if self.reload_config is None:
+            log.warning("SIGHUP: no config to reload from")
+            return
+        try:
+            config = self.reload_config()
+        except (ConfigError, OSError, ValueError) as exc:
+            self.counts["reload_failed"] += 1
+            log.error("reload failed, keeping the running config: %s", exc)
+            return
+        buses_changed = (config.input_bus, config.output_bus) != (self.config.input_bus, self.config.output_bus)
+        self.earlier.update({k: v for k, v in self.pipeline.summary().items() if isinstance(v, int)})
+        self.config = config
+        self.pipeline = Pipeline(config, output_channel=config.output_bus.channel)
+        if buses_changed:
+            self._close()
+            self._open()
+        self.counts["reloads"] += 1
+        log.info("config reloaded from %s%s", config.path, "; buses reopened" if buses_changed else "")
+
     def summary(self) -> dict:
-        return {**self.pipeline.summary(), "ticks": self.ticks, "sent": self.sent, "send_dropped": self.dropped}
+        merged = Counter(self.earlier)
+        merged.update({k: v for k, v in self.pipeline.summary().items() if isinstance(v, int)})
+        merged.update(self.counts)
+        return dict(merged)
+
+
+class _Schedule:
+    """Fixed-interval events of the loop, and input/tick rates between status updates."""
+
+    def __init__(self, watchdog_interval):
+        intervals = {"notify_status": NOTIFY_STATUS_EVERY, "log_status": STATUS_EVERY}
+        if watchdog_interval:
+            intervals["watchdog"] = watchdog_interval
+        now = time.monotonic()
+        self.intervals = intervals
+        self.next = {name: now + interval for name, interval in intervals.items()}
+        self.previous = ({}, now)
+
+    def due(self, name: str, now: float) -> bool:
+        if name not in self.next or now < self.next[name]:
+            return False
+        self.next[name] = now + self.intervals[name]
+        return True
+
+    def rates(self, summary: dict, now: float) -> dict:
+        before, then = self.previous
+        self.previous = (summary, now)
+        span = max(now - then, 1e-9)
+        return {key: (summary.get(key, 0) - before.get(key, 0)) / span for key in ("frames", "ticks")}

@@ -114,3 +114,25 @@ def test_a_missing_input_is_reported_and_marks_sideslip_invalid(config):
     assert not after.valid["beta"] and not after.valid["yaw_rate"]
     assert after.valid["vx"]
     assert np.isfinite(after.values["vx"])
+
+
+def test_divergence_resets_the_filter_and_marks_sideslip_invalid(config):
+    """A 50 km/h lane change on mu 0.3 spins the simulated car (sideslip > 20 deg): no single-track
+    model follows; the innovation test must notice, reset, and stop calling the sideslip valid."""
+    sim = simulate(config, "dlc", 50.0, 0.3, seed=1)
+    pipeline = Pipeline(config)
+    estimates = [e for frame in sim.frames for e in pipeline.feed(frame)]
+    assert pipeline.estimator.resets >= 1
+    spinning = np.interp([e.t for e in estimates], sim.truth["t"], np.abs(sim.truth["beta"])) > np.radians(10)
+    valid_beta = np.array([e.valid["beta"] if e.valid else False for e in estimates])
+    assert spinning.any()
+    assert valid_beta[spinning].mean() < 0.5
+    assert all(np.isfinite(e.values["vx"]) for e in estimates[-100:])
+
+
+def test_a_consistent_run_never_resets(config, dlc_run):
+    _, _, sim = dlc_run
+    pipeline = Pipeline(config)
+    for frame in sim.frames:
+        pipeline.feed(frame)
+    assert pipeline.estimator.resets == 0

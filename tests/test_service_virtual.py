@@ -49,7 +49,9 @@ def test_live_service_matches_offline_replay(config, dlc_run, tmp_path):
     difference = live_yaw[started] - offline_yaw[started]
     assert np.max(np.abs(difference)) < np.radians(0.5)
     assert np.sqrt(np.mean(difference**2)) < np.radians(0.1)
-    assert sum(1 for m in received if m.arbitration_id == 0x501) == len(live)
+    # One frame set per loop pass: ticks completed together send only the newest.
+    assert sum(1 for m in received if m.arbitration_id == 0x501) == len(live) - summary["superseded"]
+    assert summary["superseded"] < 0.05 * len(live)
 
 
 def test_demo_runs_and_reports_accuracy(config):

@@ -8,7 +8,7 @@ import can
 from canest.commands.common import FORMATTER, add_bus_overrides, add_config, config_from_args
 from canest.pipeline import format_summary
 from canest.replay import play, replay
-from canest.service import open_bus
+from canest.buslink import open_bus
 
 EPILOG = """examples:
   canest replay drive.log --out est.log --csv est.csv

@@ -1,9 +1,9 @@
 """canest run: the live estimation daemon."""
 from __future__ import annotations
 
-import logging
 import sys
 
+from canest import logs
 from canest.commands.common import FORMATTER, add_bus_overrides, add_config, config_from_args
 from canest.outputs import EstimateCsvWriter
 from canest.pipeline import format_summary
@@ -14,7 +14,10 @@ EPILOG = """examples:
   canest run --config my_car.yaml --channel can0 --output-channel can0
   canest run --interface virtual --channel in --output-channel out
 
-Stops cleanly on SIGINT or SIGTERM and prints where every input frame went."""
+Signals: SIGINT/SIGTERM stop cleanly and print where every input frame went;
+SIGHUP reloads the config (buses reopened only if their settings changed);
+SIGUSR1 logs counters and loop latency now. Under systemd (Type=notify) it
+reports READY, WATCHDOG and STATUS; see tools/systemd/."""
 
 
 def register(subparsers) -> None:
@@ -30,9 +33,9 @@ def register(subparsers) -> None:
 
 def run(args) -> int:
     config = config_from_args(args)
-    logging.basicConfig(level=args.log_level, stream=sys.stderr, format="%(levelname)s %(name)s: %(message)s")
+    logs.setup(args.log_level)
     writer = EstimateCsvWriter(args.csv) if args.csv else None
-    service = Service(config, csv_writer=writer)
+    service = Service(config, csv_writer=writer, reload_config=lambda: config_from_args(args))
     service.install_signal_handlers()
     try:
         summary = service.run()

@@ -1,0 +1,116 @@
+"""A python-can bus that survives its interface going away.
+
+:class:`BusLink` wraps one ``can.Bus``. Errors while receiving or sending
+close the bus and schedule a reopen with exponential backoff
+(``BACKOFF_START`` doubling to ``BACKOFF_MAX``); while the bus is away
+``recv`` waits out its timeout and returns None and ``send`` returns False,
+so the daemon's loop never blocks and never dies of a missing interface.
+A full transmit queue (ENOBUFS) or a downed interface (ENETDOWN) only drops
+the frame, and a downed input only waits: the socket stays bound and traffic
+resumes the moment the interface is up again. A vanished interface (ENODEV)
+needs a new socket: that is what the backoff reopens.
+"""
+from __future__ import annotations
+
+import errno
+import logging
+import time
+
+import can
+
+log = logging.getLogger("canest.bus")
+
+BACKOFF_START = 0.1  # s
+BACKOFF_MAX = 5.0  # s
+DROP_ONLY = {errno.ENOBUFS, errno.ENETDOWN, errno.EAGAIN}
+
+
+def _error_code(exc: Exception):
+    return getattr(exc, "error_code", None) or getattr(exc, "errno", None)
+
+
+class BusOpenError(RuntimeError):
+    pass
+
+
+def open_bus(kwargs: dict, role: str, **extra) -> can.BusABC:
+    try:
+        return can.Bus(**kwargs, **extra)
+    except (can.CanError, OSError, ValueError, ImportError) as exc:
+        raise BusOpenError(f"cannot open {role} bus {kwargs.get('interface')}:{kwargs.get('channel')}: {exc}") from None
+
+
+class BusLink:
+    def __init__(self, kwargs: dict, role: str, counts, **open_extra):
+        self.kwargs = kwargs
+        self.role = role
+        self.open_extra = open_extra
+        self.counts = counts
+        self.bus = open_bus(kwargs, role, **open_extra)  # the first open must succeed: fail fast at start
+        self.backoff = BACKOFF_START
+        self.next_attempt = 0.0
+
+    @property
+    def up(self) -> bool:
+        return self.bus is not None
+
+    def _lost(self, exc: Exception) -> None:
+        log.warning("%s bus %s lost: %s; reconnecting", self.role, self.kwargs.get("channel"), exc)
+        self.counts[f"{self.role}_bus_lost"] += 1
+        self.close()
+        self.next_attempt = time.monotonic() + self.backoff
+
+    def _reopen(self) -> None:
+        if time.monotonic() < self.next_attempt:
+            return
+        try:
+            self.bus = open_bus(self.kwargs, self.role, **self.open_extra)
+        except BusOpenError as exc:
+            self.backoff = min(self.backoff * 2.0, BACKOFF_MAX)
+            self.next_attempt = time.monotonic() + self.backoff
+            log.warning("%s; next attempt in %.1f s", exc, self.backoff)
+            return
+        log.warning("%s bus %s reopened", self.role, self.kwargs.get("channel"))
+        self.counts[f"{self.role}_bus_reconnects"] += 1
+
+    def recv(self, timeout: float):
+        if self.bus is None:
+            self._reopen()
+            if self.bus is None:
+                time.sleep(timeout)
+                return None
+        try:
+            msg = self.bus.recv(timeout=timeout)
+        except (can.CanError, OSError) as exc:
+            if _error_code(exc) in DROP_ONLY:
+                log.warning("%s bus %s is down: %s", self.role, self.kwargs.get("channel"), exc)
+                self.counts[f"{self.role}_bus_down"] += 1
+                time.sleep(timeout)  # the error returns at once: do not spin
+            else:
+                self._lost(exc)
+            return None
+        if msg is not None:
+            self.backoff = BACKOFF_START  # a frame arrived: the link is really back
+        return msg
+
+    def send(self, msg: can.Message) -> bool:
+        if self.bus is None:
+            self._reopen()
+            if self.bus is None:
+                return False
+        try:
+            self.bus.send(msg, timeout=0)
+            self.backoff = BACKOFF_START
+            return True
+        except (can.CanError, OSError) as exc:
+            if _error_code(exc) not in DROP_ONLY and "buffer full" not in str(exc):
+                self._lost(exc)
+            return False
+
+    def close(self) -> None:
+        if self.bus is not None:
+            try:
+                self.bus.shutdown()
+            except (can.CanError, OSError):
+                pass
+            self.bus = None

@@ -1,0 +1,158 @@
+"""Helpers for tests against a running daemon on real vcan buses."""
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+
+import can
+
+from tests.conftest import CONFIG
+
+
+class Daemon:
+    """``canest run`` as a subprocess (vcan0 -> vcan1 unless the config says otherwise)."""
+
+    def __init__(self, csv_path=None, config=CONFIG, env=None, args=()):
+        command = [sys.executable, "-m", "canest", "run", "--config", str(config), *args]
+        if csv_path:
+            command += ["--csv", str(csv_path)]
+        self.process = subprocess.Popen(command, stderr=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
+                                        env={**os.environ, **(env or {})})
+        self.lines = []
+        deadline = time.monotonic() + 30
+        while time.monotonic() < deadline:
+            line = self.process.stderr.readline()
+            self.lines.append(line)
+            if "estimating:" in line or not line:
+                break
+        assert "estimating:" in self.lines[-1], "".join(self.lines)
+        self.reader = threading.Thread(target=lambda: self.lines.extend(self.process.stderr), daemon=True)
+        self.reader.start()
+
+    @property
+    def stderr(self) -> str:
+        return "".join(self.lines)
+
+    def signal(self, number) -> None:
+        self.process.send_signal(number)
+
+    def alive(self) -> bool:
+        return self.process.poll() is None
+
+    def rss_kib(self) -> int:
+        with open(f"/proc/{self.process.pid}/status") as handle:
+            return next(int(line.split()[1]) for line in handle if line.startswith("VmRSS:"))
+
+    def terminate(self) -> int:
+        if self.alive():
+            self.process.send_signal(signal.SIGTERM)
+        code = self.process.wait(timeout=30)
+        self.reader.join(timeout=5)
+        return code
+
+    def wait_for(self, text, timeout=10.0, count=1) -> bool:
+        """Wait until ``text`` has appeared ``count`` times in the daemon's log."""
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            if self.stderr.count(text) >= count:
+                return True
+            time.sleep(0.05)
+        return False
+
+
+class Player(threading.Thread):
+    """Send simulated frames onto vcan0 at their pace, looping, surviving the interface going away.
+
+    ``drop(frame, elapsed)`` may return True to leave a frame out.
+    """
+
+    def __init__(self, frames, channel="vcan0", speed=1.0, drop=None, loops=1000):
+        super().__init__(daemon=True)
+        self.frames, self.channel, self.speed, self.drop, self.loops = frames, channel, speed, drop, loops
+        self.done = threading.Event()
+        self.sent = 0
+        self.failed = 0
+        self.start_time = None
+
+    def _bus(self):
+        try:
+            return can.Bus(interface="socketcan", channel=self.channel, fd=True)
+        except (OSError, can.CanError):
+            return None
+
+    def run(self):
+        bus = self._bus()
+        self.start_time = time.perf_counter()
+        t_first = self.frames[0].timestamp
+        duration = self.frames[-1].timestamp - t_first + 0.01
+        for loop in range(self.loops):
+            for frame in self.frames:
+                if self.done.is_set():
+                    break
+                log_time = loop * duration + frame.timestamp - t_first
+                delay = log_time / self.speed - (time.perf_counter() - self.start_time)
+                if delay > 0:
+                    time.sleep(delay)
+                if self.drop and self.drop(frame, time.perf_counter() - self.start_time):
+                    continue
+                if bus is None:
+                    bus = self._bus()
+                    if bus is None:
+                        self.failed += 1
+                        continue
+                try:
+                    bus.send(frame)
+                    self.sent += 1
+                except (OSError, can.CanError):
+                    self.failed += 1
+                    bus.shutdown()
+                    bus = None
+        if bus is not None:
+            bus.shutdown()
+        self.done.set()
+
+    def stop(self):
+        self.done.set()
+        self.join(timeout=10)
+
+
+class Capture(threading.Thread):
+    """Every frame on vcan1, with its receive time."""
+
+    def __init__(self, channel="vcan1"):
+        super().__init__(daemon=True)
+        self.bus = can.Bus(interface="socketcan", channel=channel)
+        self.frames = []
+        self.done = threading.Event()
+        self.start()
+
+    def run(self):
+        while not self.done.is_set():
+            try:
+                msg = self.bus.recv(timeout=0.1)
+            except (OSError, can.CanError):
+                time.sleep(0.05)
+                continue
+            if msg is not None:
+                self.frames.append(msg)
+
+    def stop(self):
+        self.done.set()
+        self.join(timeout=5)
+        self.bus.shutdown()
+        return self.frames
+
+
+def ip(*args):
+    subprocess.run(["ip", "link", *args], check=True)
+
+
+def restore_vcan(name):
+    """Make sure ``name`` exists, is up, and carries CAN FD (the guest's set-up)."""
+    if subprocess.run(["ip", "link", "show", name], capture_output=True).returncode != 0:
+        ip("add", "dev", name, "type", "vcan")
+    ip("set", name, "down")
+    ip("set", name, "mtu", "72")
+    ip("set", name, "up")

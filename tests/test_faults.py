@@ -1,0 +1,258 @@
+"""The daemon against faults, on real vcan buses (SocketCAN lane), and the systemd notify protocol.
+
+Each test starts ``canest run`` on vcan0 -> vcan1, plays a simulated drive onto
+vcan0 with a thread that can drop or corrupt frames, breaks something, and
+reads the daemon's status frames on vcan1 and its frame summary.
+"""
+import os
+import signal
+import socket
+import subprocess
+import time
+
+import can
+import cantools
+import numpy as np
+import pytest
+
+from canest import integrity
+from canest.evaluate import read_table
+from canest.signals import INPUT_GROUPS
+from tests.conftest import ROOT
+from tests.live import Capture, Daemon, Player, ip, restore_vcan
+
+pytestmark = pytest.mark.socketcan
+DB = cantools.database.load_file(str(ROOT / "dbc" / "canest_estimates.dbc"))
+STATUS = DB.get_message_by_name("CE_Status")
+OUTPUT_IDS = {m.frame_id for m in DB.messages}
+IMU_BIT = 1 << list(INPUT_GROUPS).index("imu")
+BETA_VALID, YAW_VALID = 1 << 2, 1 << 3
+
+
+def statuses(frames, since=0.0, until=float("inf")):
+    return [STATUS.decode(m.data, decode_choices=False) for m in frames
+            if m.arbitration_id == STATUS.frame_id and since <= m.timestamp <= until]
+
+
+def summary_value(stderr, key):
+    last = [line for line in stderr.splitlines() if line.startswith("frames=")][-1]
+    fields = dict(part.split("=") for part in last.split())
+    return int(fields.get(key, 0))
+
+
+@pytest.fixture
+def session(dlc_run, tmp_path):
+    """Capture on vcan1, the daemon, and a looping player on vcan0; torn down whatever happens."""
+    parts = {}
+
+    def start(drop=None, speed=1.0, env=None, config=None):
+        parts["capture"] = Capture()
+        kwargs = {"env": env} if env else {}
+        if config:
+            kwargs["config"] = config
+        parts["daemon"] = Daemon(tmp_path / "live.csv", **kwargs)
+        parts["player"] = Player(dlc_run[2].frames, drop=drop, speed=speed)
+        parts["player"].start()
+        return parts["daemon"], parts["player"], parts["capture"]
+
+    yield start
+    if "player" in parts:
+        parts["player"].stop()
+    restore_vcan("vcan0")
+    restore_vcan("vcan1")
+    if "daemon" in parts:
+        parts["daemon"].terminate()
+    if "capture" in parts:
+        parts["capture"].stop()
+
+
+def test_input_interface_down_up_and_deleted_then_back(session):
+    daemon, player, capture = session()
+    time.sleep(2.0)
+    ip("set", "vcan0", "down")
+    t_down = time.time()  # after the command: starting a process takes ~0.3 s in the UML guest
+    time.sleep(1.0)
+    ip("set", "vcan0", "up")
+    time.sleep(1.5)
+    ip("del", "vcan0")
+    t_deleted = time.time()
+    time.sleep(1.0)
+    restore_vcan("vcan0")
+    time.sleep(3.0)
+    assert daemon.alive()
+    frames = capture.frames[:]
+    during_down = statuses(frames, t_down + 0.3, t_down + 0.9)
+    during_deleted = statuses(frames, t_deleted + 0.3, t_deleted + 0.9)
+    after = statuses(frames, time.time() - 1.0)
+    assert during_down and during_deleted and after, "the daemon kept sending status while its input was away"
+    detail = [(round(m.timestamp - t_down, 3), STATUS.decode(m.data)["ValidFlags"]) for m in frames
+              if m.arbitration_id == STATUS.frame_id and t_down - 0.1 < m.timestamp < t_deleted + 1.2]
+    assert all(s["ValidFlags"] & YAW_VALID == 0 for s in during_down + during_deleted), str(detail[::5])
+    assert all(s["MissingInputs"] & IMU_BIT for s in during_down + during_deleted)
+    assert all(s["Mode"] == 1 and s["ValidFlags"] & YAW_VALID for s in after[-20:])
+    assert "diverged" not in daemon.stderr
+    assert daemon.terminate() == 0
+    assert summary_value(daemon.stderr, "input_bus_down") >= 1  # down: the socket waits
+    assert summary_value(daemon.stderr, "input_bus_lost") >= 1  # deleted: a new socket is needed
+    assert summary_value(daemon.stderr, "input_bus_reconnects") >= 1
+    assert "is down" in daemon.stderr and "reopened" in daemon.stderr
+
+
+def test_one_input_message_stops_and_recovers(session):
+    daemon, player, capture = session(drop=lambda f, elapsed: f.arbitration_id == 0x130 and 2.0 < elapsed < 3.0)
+    time.sleep(4.5)
+    frames = capture.frames[:]
+    start = player.start_time and time.time() - (time.perf_counter() - player.start_time)
+    missing = statuses(frames, start + 2.2, start + 2.9)
+    recovered = statuses(frames, start + 3.5, start + 4.4)
+    assert missing and all(s["MissingInputs"] == IMU_BIT for s in missing)
+    assert all(s["ValidFlags"] & (YAW_VALID | BETA_VALID) == 0 for s in missing)
+    assert all(s["ValidFlags"] & 1 for s in missing), "vx from the wheels stays valid"
+    assert all(s["MissingInputs"] == 0 and s["ValidFlags"] & YAW_VALID for s in recovered)
+    assert daemon.terminate() == 0
+
+
+def crafted(frame_id, data, **kwargs):
+    return can.Message(arbitration_id=frame_id, data=data, is_extended_id=False, **kwargs)
+
+
+def test_malformed_traffic_is_counted_never_fatal_and_does_not_move_the_estimate(session, tmp_path):
+    daemon, player, capture = session()
+    time.sleep(2.0)
+    attacker = can.Bus(interface="socketcan", channel="vcan0", fd=True)
+    good = integrity.seal(0x130, bytearray(8), 7)
+    bad_crc = bytearray(good)
+    bad_crc[7] ^= 0xFF
+    for _ in range(50):
+        attacker.send(crafted(0x130, bytes(4)))  # wrong DLC
+        attacker.send(crafted(0x130, b"", is_remote_frame=True, dlc=8))  # remote frame
+        attacker.send(crafted(0x130, bytes(bad_crc)))  # checksum wrong
+        attacker.send(crafted(0x130, bytes(16), is_fd=True))  # CAN FD on a classic ID
+        attacker.send(crafted(0x7F0, bytes(8)))  # unknown ID: the kernel filter drops it
+    subprocess.run(["cangen", "vcan0", "-I", "130", "-L", "8", "-D", "r", "-g", "1", "-n", "3000"], check=True)
+    attacker.shutdown()
+    time.sleep(1.5)
+    assert daemon.alive()
+    assert daemon.terminate() == 0
+    for cause in ("rejected_dlc", "rejected_remote_frame", "rejected_fd_mismatch"):
+        assert summary_value(daemon.stderr, cause) == 50, cause
+    # Random payloads fail the CRC (255 in 256); the few that pass mostly fail the counter sequence.
+    assert summary_value(daemon.stderr, "rejected_checksum") >= 50 + 2900
+    assert summary_value(daemon.stderr, "resets") == 0
+    assert summary_value(daemon.stderr, "ignored_id") == 0
+    yaw = read_table(tmp_path / "live.csv")["yaw_rate"]
+    steps = np.abs(np.diff(yaw[np.isfinite(yaw)]))
+    assert np.degrees(steps.max()) < 1.0, "a rejected frame moved the yaw rate estimate"
+
+
+def test_output_interface_down_drops_frames_without_blocking_and_recovers(session, tmp_path):
+    daemon, player, capture = session()
+    time.sleep(2.0)
+    ip("set", "vcan1", "down")
+    time.sleep(1.0)
+    ip("set", "vcan1", "up")
+    t_up = time.time()
+    time.sleep(1.5)
+    assert daemon.terminate() == 0
+    assert summary_value(daemon.stderr, "send_dropped") > 50
+    assert statuses(capture.frames, t_up + 0.2), "frames flow again after the interface returns"
+    t = read_table(tmp_path / "live.csv")["t"]
+    assert np.diff(t).max() < 0.03, "the loop kept ticking while the output was down"
+
+
+def test_ten_times_nominal_traffic_for_ten_seconds(session, tmp_path):
+    daemon, player, capture = session(speed=10.0)
+    time.sleep(1.0)
+    rss_start = daemon.rss_kib()
+    time.sleep(10.0)
+    player.stop()
+    assert daemon.alive()
+    rss_burst = daemon.rss_kib()
+    normal = Player(player.frames, speed=1.0)
+    normal.start()
+    time.sleep(3.0)  # the kernel's receive queue drains
+    daemon.signal(signal.SIGUSR1)  # the status line clears the latency window
+    time.sleep(2.0)
+    before = daemon.stderr.count("latency p50")
+    daemon.signal(signal.SIGUSR1)
+    assert daemon.wait_for("latency p50", count=before + 1)
+    normal.stop()
+    latency_line = [line for line in daemon.stderr.splitlines() if "latency p50" in line][-1]
+    p99 = float(latency_line.split("p99 ")[1].split(" ms")[0])
+    rss_end = daemon.rss_kib()
+    assert daemon.terminate() == 0
+    print(f"RSS {rss_start} -> {rss_burst} -> {rss_end} KiB; after the burst: {latency_line.split('latency ')[1]}")
+    assert rss_end - rss_start < 20_000, f"RSS grew from {rss_start} to {rss_end} KiB"
+    assert p99 < 20.0, latency_line
+
+
+def test_transmits_only_output_ids_at_most_at_their_cycle_rate_under_flood(session):
+    daemon, player, capture = session()
+    time.sleep(1.0)
+    t0 = time.time()
+    flood = subprocess.Popen(["cangen", "vcan0", "-g", "0", "-I", "r", "-L", "r", "-D", "r", "-n", "20000"])
+    flood.wait(timeout=60)
+    subprocess.run(["cangen", "vcan0", "-g", "0", "-I", "130", "-L", "8", "-D", "r", "-n", "5000"], check=True)
+    t1 = time.time()
+    time.sleep(0.5)
+    frames = [m for m in capture.frames if t0 <= m.timestamp <= t1]
+    assert {m.arbitration_id for m in frames} <= OUTPUT_IDS
+    assert daemon.alive()
+    for frame_id in OUTPUT_IDS:
+        times = np.array([m.timestamp for m in frames if m.arbitration_id == frame_id])
+        if times.size > 1:
+            per_second = np.histogram(times, bins=np.arange(t0, t1 + 1.0, 1.0))[0]
+            assert per_second.max() <= 110, f"{frame_id:#x}: {per_second.max()} frames in one second"
+    assert daemon.terminate() == 0
+
+
+def test_sighup_reloads_the_config_and_keeps_running_on_a_broken_one(session, tmp_path):
+    config = tmp_path / "car.yaml"
+    original = (ROOT / "configs" / "dici_ev.yaml").read_text().replace("../dbc/", str(ROOT / "dbc") + "/")
+    config.write_text(original)
+    daemon, player, capture = session(config=config)
+    time.sleep(1.5)
+    config.write_text(original.replace("filter: ckf ", "filter: fckf"))
+    daemon.signal(signal.SIGHUP)
+    assert daemon.wait_for("config reloaded")
+    time.sleep(1.0)
+    assert statuses(capture.frames, time.time() - 0.5)[-1]["FilterId"] == 8  # fckf in the DBC's table
+    config.write_text("vehicle: [broken\n")
+    daemon.signal(signal.SIGHUP)
+    assert daemon.wait_for("reload failed")
+    time.sleep(0.5)
+    assert daemon.alive() and statuses(capture.frames, time.time() - 0.3)
+    assert daemon.terminate() == 0
+
+
+def test_systemd_notify_ready_watchdog_status_and_stopping(session, tmp_path):
+    path = str(tmp_path / "notify.sock")
+    listener = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
+    listener.bind(path)
+    listener.settimeout(0.2)
+    messages = []
+
+    def collect(seconds):
+        deadline = time.monotonic() + seconds
+        while time.monotonic() < deadline:
+            try:
+                messages.append((time.monotonic(), listener.recv(4096).decode()))
+            except socket.timeout:
+                pass
+
+    daemon, player, capture = session(env={"NOTIFY_SOCKET": path, "WATCHDOG_USEC": "1000000"})
+    collect(3.0)
+    player.stop()  # the bus goes idle: the watchdog must go on
+    collect(2.0)
+    daemon.signal(signal.SIGTERM)
+    collect(1.0)
+    listener.close()
+    os.unlink(path)
+    texts = [m for _, m in messages]
+    assert sum("READY=1" in m for m in texts) == 1
+    watchdog_times = [t for t, m in messages if "WATCHDOG=1" in m]
+    # WATCHDOG=1 every 0.5 s; systemd would act after 1 s of silence. Gaps are measured at reception.
+    assert len(watchdog_times) >= 8 and np.diff(watchdog_times).max() < 0.9
+    assert watchdog_times[-1] > messages[0][0] + 4.0, "the watchdog went on while the bus was idle"
+    assert any(m.startswith("STATUS=mode normal, input") and "frames/s" in m for m in texts)
+    assert texts[-1] == "STOPPING=1"
