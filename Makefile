@@ -12,7 +12,7 @@ demo: $(BIN)/canest
 
 test: test-host test-vcan
 
-test-host: $(BIN)/canest
+test-host: $(BIN)/canest system-deps
 	$(BIN)/python -m pytest -m "not socketcan"
 
 test-vcan: $(BIN)/canest system-deps

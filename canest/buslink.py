@@ -23,6 +23,7 @@ log = logging.getLogger("canest.bus")
 BACKOFF_START = 0.1  # s
 BACKOFF_MAX = 5.0  # s
 DROP_ONLY = {errno.ENOBUFS, errno.ENETDOWN, errno.EAGAIN}
+GONE = {errno.ENODEV, errno.ENXIO, errno.EBADF, errno.ENOTCONN}  # the socket is useless: reopen
 
 
 def _error_code(exc: Exception):
@@ -103,9 +104,9 @@ class BusLink:
             self.backoff = BACKOFF_START
             return True
         except (can.CanError, OSError) as exc:
-            if _error_code(exc) not in DROP_ONLY and "buffer full" not in str(exc):
+            if _error_code(exc) in GONE:
                 self._lost(exc)
-            return False
+            return False  # anything else (queue full, interface down): this frame is dropped
 
     def close(self) -> None:
         if self.bus is not None:

@@ -4,6 +4,7 @@ import sys
 
 import can
 import cantools
+import numpy as np
 import pytest
 
 from canest.evaluate import read_table
@@ -89,3 +90,32 @@ def test_compare_rejects_unknown_filter(dlc_run):
     log, truth, _ = dlc_run
     result = canest("compare", log, truth, "--filters", "ckf,kalman9", check=False)
     assert result.returncode == 2 and "unknown filter 'kalman9'" in result.stderr
+
+
+def test_run_with_a_broken_config_fails_before_touching_the_bus(tmp_path):
+    bad = tmp_path / "bad.yaml"
+    bad.write_text((ROOT / "configs" / "dici_ev.yaml").read_text().replace("ESC_IMU.LatAccel", "ESC_IMU.LatAcc"))
+    result = canest("run", "--config", bad, "--interface", "socketcan", "--channel", "nosuchcan9", check=False)
+    assert result.returncode == 2
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and f"{bad}:" in lines[0] and "input.signals.ay.signal" in lines[0]
+    assert "nosuchcan9" not in result.stderr
+
+
+def test_replay_of_concatenated_logs_accounts_for_every_frame(dlc_run, tmp_path):
+    """The second log's clock starts before the first one ends (a replay of concatenated drives)."""
+    log, _, sim = dlc_run
+    joined = tmp_path / "joined.log"
+    with can.Logger(str(joined)) as writer:
+        for frame in sim.frames:
+            writer.on_message_received(frame)
+        for frame in sim.frames:
+            writer.on_message_received(can.Message(timestamp=frame.timestamp + 5.0, arbitration_id=frame.arbitration_id,
+                                                   data=frame.data, is_extended_id=False))
+    out = canest("replay", joined, "--csv", tmp_path / "est.csv", "-q").stdout
+    fields = dict(part.split("=") for part in out.split())
+    accounted = sum(int(v) for k, v in fields.items() if k == "decoded" or k.startswith("rejected_") or k == "ignored_id")
+    assert int(fields["frames"]) == 2 * len(sim.frames) == accounted
+    assert int(fields["time_backwards"]) > 0
+    t = read_table(tmp_path / "est.csv")["t"]
+    assert np.all(np.diff(t) > 0), "one row per tick, never a step back in time"

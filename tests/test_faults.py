@@ -8,6 +8,7 @@ import os
 import signal
 import socket
 import subprocess
+import sys
 import time
 
 import can
@@ -256,3 +257,13 @@ def test_systemd_notify_ready_watchdog_status_and_stopping(session, tmp_path):
     assert watchdog_times[-1] > messages[0][0] + 4.0, "the watchdog went on while the bus was idle"
     assert any(m.startswith("STATUS=mode normal, input") and "frames/s" in m for m in texts)
     assert texts[-1] == "STOPPING=1"
+
+
+def test_monitor_on_vcan1(session):
+    daemon, player, capture = session()
+    time.sleep(1.0)
+    out = subprocess.run([sys.executable, "-m", "canest", "monitor", "--channel", "vcan1", "--duration", "2"],
+                         capture_output=True, text=True, timeout=60).stdout
+    last = out.strip().split("\n\n")[-1]
+    assert "mode normal" in last and "CRC errors 0" in last and "yaw rate" in last
+    assert daemon.terminate() == 0

@@ -104,3 +104,38 @@ def test_time_jump_and_backwards_timestamps_are_counted_not_stepped(config, dlc_
     assert pipeline.feed(old) == []
     assert pipeline.counts["time_backwards"] == 1
     assert ticks_before > 0
+
+
+def test_monitor_shows_estimates_and_health_of_a_running_service(config, dlc_run):
+    import io
+
+    from canest.config import load_database
+    from canest.monitor import run_monitor
+
+    _, _, sim = dlc_run
+    live_config = config.with_buses(BusConfig("virtual", "mon-in"), BusConfig("virtual", "mon-out"))
+    service = Service(live_config)
+    watcher = can.Bus(interface="virtual", channel="mon-out")
+    player_bus = can.Bus(interface="virtual", channel="mon-in")
+    out = io.StringIO()
+
+    def player():
+        time.sleep(0.2)
+        play_messages(sim.frames[:2500], player_bus)
+        service.stop()
+
+    threads = [threading.Thread(target=player),
+               threading.Thread(target=lambda: run_monitor(watcher, load_database(config.output_dbc, "test"),
+                                                           "virtual:mon-out", out, refresh=0.5, duration=3.5))]
+    for thread in threads:
+        thread.start()
+    service.run()
+    for thread in threads:
+        thread.join()
+    watcher.shutdown()
+    player_bus.shutdown()
+    last = out.getvalue().strip().split("\n\n")[-1]
+    assert "filter ckf  mode normal  resets 0" in last
+    assert "CRC errors 0  counter gaps 0" in last
+    vx_line = next(line for line in last.splitlines() if line.startswith("vx "))
+    assert 21.5 < float(vx_line.split()[1]) < 23.0 and vx_line.endswith("yes")

@@ -1,0 +1,94 @@
+"""A live terminal view of a running daemon's output, decoded through the output DBC.
+
+Like ``cantools monitor`` but for canest's contract: the latest value,
+standard deviation and validity of each estimate, the status message (filter,
+mode, missing inputs, resets, NIS), and the health of the output stream
+itself (frame rate, CRC failures, counter gaps).
+"""
+from __future__ import annotations
+
+import math
+import time
+from collections import Counter
+
+import can
+
+from canest import integrity
+from canest.outputs import OUTPUT_MESSAGES, STATUS_MESSAGE
+from canest.signals import INPUT_GROUPS
+
+# (label, message, signal stem, display unit, factor from SI)
+ROWS = [
+    ("vx", "CE_Velocity", "Vx", "m/s", 1.0),
+    ("vy", "CE_Velocity", "Vy", "m/s", 1.0),
+    ("yaw rate", "CE_YawSideslip", "YawRate", "deg/s", 180 / math.pi),
+    ("sideslip", "CE_YawSideslip", "Sideslip", "deg", 180 / math.pi),
+    *[(f"Fy {w}", f"CE_LateralForces{'Front' if w[0] == 'f' else 'Rear'}", f"Fy{w.upper()}", "N", 1.0)
+      for w in ("fl", "fr", "rl", "rr")],
+    *[(f"mu {w}", "CE_Friction", f"Mu{w.upper()}", "", 1.0) for w in ("fl", "fr", "rl", "rr")],
+]
+
+
+class Monitor:
+    def __init__(self, database):
+        self.database = database
+        self.messages = {m.frame_id: m for m in database.messages if m.name in (*OUTPUT_MESSAGES, STATUS_MESSAGE)}
+        self.latest = {}
+        self.counts = Counter()
+        self.counters = {}
+        self.started = time.monotonic()
+
+    def receive(self, msg: can.Message) -> None:
+        message = self.messages.get(msg.arbitration_id)
+        if message is None:
+            self.counts["foreign"] += 1
+            return
+        self.counts["frames"] += 1
+        if not integrity.checksum_ok(msg.arbitration_id, msg.data, 7):
+            self.counts["crc_errors"] += 1
+            return
+        values = message.decode(msg.data, decode_choices=True)
+        counter = next(int(v) for k, v in values.items() if k.endswith("_Counter"))
+        last = self.counters.get(message.name)
+        if last is not None and (counter - last) % 16 != 1:
+            self.counts["counter_gaps"] += 1
+        self.counters[message.name] = counter
+        self.latest[message.name] = values
+
+    def render(self, title: str) -> str:
+        elapsed = max(time.monotonic() - self.started, 1e-9)
+        c = self.counts
+        lines = [f"canest monitor  {title}  frames {c['frames']} ({c['frames'] / elapsed:.0f}/s)  "
+                 f"CRC errors {c['crc_errors']}  counter gaps {c['counter_gaps']}"]
+        status = self.latest.get(STATUS_MESSAGE)
+        if status is None:
+            lines.append("no status message yet")
+        else:
+            missing = [name for i, name in enumerate(INPUT_GROUPS) if int(status["MissingInputs"]) >> i & 1]
+            lines.append(f"filter {status['FilterId']}  mode {status['Mode']}  resets {status['ResetCount']}  "
+                         f"NIS {status['InnovationNis']:.2f}  missing: {', '.join(missing) or '-'}")
+        lines.append(f"{'state':<10} {'value':>12} {'std':>10}  valid")
+        for label, message, stem, unit, factor in ROWS:
+            values = self.latest.get(message)
+            if values is None:
+                continue
+            valid = "yes" if values[f"{stem}Valid"] else "no"
+            lines.append(f"{label:<10} {values[stem] * factor:>9.3f} {unit:<5}{values[stem + 'Std'] * factor:>8.3f}"
+                         f"  {valid}")
+        return "\n".join(lines)
+
+
+def run_monitor(bus: can.BusABC, database, title: str, out, refresh: float = 0.5, duration=None, clear=False):
+    """Print the view every ``refresh`` s until ``duration`` s have passed (or forever)."""
+    monitor = Monitor(database)
+    end = math.inf if duration is None else time.monotonic() + duration
+    next_draw = time.monotonic()
+    while time.monotonic() < end:
+        msg = bus.recv(timeout=min(refresh, max(end - time.monotonic(), 0.0)))
+        if msg is not None:
+            monitor.receive(msg)
+        if time.monotonic() >= next_draw:
+            next_draw += refresh
+            out.write(("\x1b[H\x1b[J" if clear else "\n") + monitor.render(title) + "\n")
+            out.flush()
+    return monitor

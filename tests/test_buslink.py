@@ -1,0 +1,40 @@
+"""Output that cannot keep up: frames dropped and counted, the loop never blocks."""
+import threading
+import time
+
+import can
+
+from canest.config import BusConfig
+from canest.service import Service
+
+
+def test_a_full_output_queue_drops_frames_without_blocking(config, dlc_run):
+    """A receiver on the output bus that never reads fills its 5-frame queue: python-can's virtual
+    bus then refuses every send, as SocketCAN does with ENOBUFS."""
+    _, _, sim = dlc_run
+    live_config = config.with_buses(BusConfig("virtual", "full-in"), BusConfig("virtual", "full-out"))
+    stuck = can.Bus(interface="virtual", channel="full-out", rx_queue_size=5)
+    ticks = []
+    service = Service(live_config, on_estimate=lambda e: ticks.append(time.monotonic()))
+    player = can.Bus(interface="virtual", channel="full-in")
+
+    def play():
+        time.sleep(0.2)
+        start = time.perf_counter()
+        for frame in sim.frames[:1500]:
+            delay = frame.timestamp - sim.frames[0].timestamp - (time.perf_counter() - start)
+            if delay > 0:
+                time.sleep(delay)
+            player.send(frame)
+        service.stop()
+
+    thread = threading.Thread(target=play)
+    thread.start()
+    summary = service.run()
+    thread.join()
+    player.shutdown()
+    stuck.shutdown()
+    assert summary["sent"] == 5 and summary["send_dropped"] > 500  # the 5 that fit the queue, then drops
+    assert "output_bus_lost" not in summary, "a full queue is not a lost bus"
+    assert max(b - a for a, b in zip(ticks, ticks[1:])) < 0.1, "the loop blocked on the full output"
+    assert summary["ticks"] > 250
