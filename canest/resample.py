@@ -49,7 +49,13 @@ class Resampler:
 
 
 class TickClock:
-    """Tick times ``t0 + k dt``; a gap longer than ``max_gap`` re-anchors the grid instead of catching up."""
+    """Tick times ``t0 + k dt``.
+
+    A frame more than ``max_gap`` after the next tick (a gap, a clock step
+    forward) or before it (a clock step back) re-anchors the grid at the
+    frame instead of catching up tick by tick or waiting for the clock to
+    return; each re-anchoring is counted in ``jumps``.
+    """
 
     def __init__(self, dt: float, max_gap: float = 1.0):
         self.dt = dt
@@ -70,7 +76,7 @@ class TickClock:
         if self.t0 is None:
             self.anchor(t)
             return
-        if t - self.next_tick > self.max_gap:
+        if abs(t - self.next_tick) > self.max_gap:
             self.jumps += 1
             self.anchor(t)
             return

@@ -65,12 +65,14 @@ class Daemon:
 class Player(threading.Thread):
     """Send simulated frames onto vcan0 at their pace, looping, surviving the interface going away.
 
-    ``drop(frame, elapsed)`` may return True to leave a frame out.
+    ``drop(frame, elapsed)`` may return True to leave a frame out; ``mutate(frame, elapsed)`` returns
+    the frame to send instead.
     """
 
-    def __init__(self, frames, channel="vcan0", speed=1.0, drop=None, loops=1000):
+    def __init__(self, frames, channel="vcan0", speed=1.0, drop=None, loops=1000, mutate=None):
         super().__init__(daemon=True)
         self.frames, self.channel, self.speed, self.drop, self.loops = frames, channel, speed, drop, loops
+        self.mutate = mutate
         self.done = threading.Event()
         self.sent = 0
         self.failed = 0
@@ -95,8 +97,11 @@ class Player(threading.Thread):
                 delay = log_time / self.speed - (time.perf_counter() - self.start_time)
                 if delay > 0:
                     time.sleep(delay)
-                if self.drop and self.drop(frame, time.perf_counter() - self.start_time):
+                elapsed = time.perf_counter() - self.start_time
+                if self.drop and self.drop(frame, elapsed):
                     continue
+                if self.mutate:
+                    frame = self.mutate(frame, elapsed)
                 if bus is None:
                     bus = self._bus()
                     if bus is None:

@@ -106,3 +106,34 @@ def test_decoded_values_are_si_and_iso_signed(config):
     encoder, decoder = InputEncoder(config), InputDecoder(config)
     decoded = dict(decoder.decode(encoder.encode(0xC2, {"steering_wheel_angle": math.radians(90)}, 0.0)))
     assert decoded["steering_wheel_angle"] == pytest.approx(math.radians(90), abs=1e-3)
+
+
+def test_not_finite_values_of_a_float_signal_are_rejected(tmp_path):
+    import struct
+
+    dbc = tmp_path / "float.dbc"
+    dbc.write_text('''VERSION ""
+NS_ :
+BS_:
+BU_: A
+BO_ 256 FLOAT_IMU: 8 A
+ SG_ YawRateF : 0|32@1- (1,0) [-10|10] "rad/s" A
+ SG_ LatAccF : 32|32@1- (1,0) [-50|50] "m/s^2" A
+SIG_VALTYPE_ 256 YawRateF : 1;
+SIG_VALTYPE_ 256 LatAccF : 1;
+''')
+    config = load_config(ROOT / "configs" / "dici_ev.yaml")
+    import dataclasses
+
+    from canest.config import SignalSpec
+
+    signals = {**config.signals, "yaw_rate": SignalSpec("yaw_rate", "FLOAT_IMU", "YawRateF", 1.0),
+               "ay": SignalSpec("ay", "FLOAT_IMU", "LatAccF", 1.0)}
+    decoder = InputDecoder(dataclasses.replace(config, input_dbc=dbc, signals={k: v for k, v in signals.items()
+                                                                               if k in ("yaw_rate", "ay")}, messages={}))
+    for value in (float("nan"), float("inf")):
+        assert decoder.decode(can.Message(arbitration_id=256, data=struct.pack("<ff", value, 1.0),
+                                          is_extended_id=False)) is None
+    assert dict(decoder.decode(can.Message(arbitration_id=256, data=struct.pack("<ff", 0.5, 1.0),
+                                           is_extended_id=False))) == {"yaw_rate": 0.5, "ay": 1.0}
+    assert decoder.counts["rejected_non_finite"] == 2

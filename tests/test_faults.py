@@ -46,13 +46,13 @@ def session(dlc_run, tmp_path):
     """Capture on vcan1, the daemon, and a looping player on vcan0; torn down whatever happens."""
     parts = {}
 
-    def start(drop=None, speed=1.0, env=None, config=None):
+    def start(drop=None, speed=1.0, env=None, config=None, mutate=None):
         parts["capture"] = Capture()
         kwargs = {"env": env} if env else {}
         if config:
             kwargs["config"] = config
         parts["daemon"] = Daemon(tmp_path / "live.csv", **kwargs)
-        parts["player"] = Player(dlc_run[2].frames, drop=drop, speed=speed)
+        parts["player"] = Player(dlc_run[2].frames, drop=drop, speed=speed, mutate=mutate)
         parts["player"].start()
         return parts["daemon"], parts["player"], parts["capture"]
 
@@ -267,3 +267,40 @@ def test_monitor_on_vcan1(session):
     last = out.strip().split("\n\n")[-1]
     assert "mode normal" in last and "CRC errors 0" in last and "yaw rate" in last
     assert daemon.terminate() == 0
+
+
+def test_values_out_of_the_dbc_range_are_rejected_with_a_valid_crc_and_counter(session, tmp_path):
+    """For one second the ESC IMU reports a yaw rate of 327 deg/s (raw 0x7FFF; the DBC allows 300),
+    with its counter in sequence and its CRC right: every such frame is rejected."""
+    imu = cantools.database.load_file(str(ROOT / "dbc" / "canest_vehicle.dbc")).get_message_by_name("ESC_IMU")
+
+    def saturate(frame, elapsed):
+        if frame.arbitration_id != imu.frame_id or not 2.0 < elapsed < 3.0:
+            return frame
+        data = bytearray(frame.data)
+        data[4:6] = (0x7FFF).to_bytes(2, "little")
+        return can.Message(arbitration_id=frame.arbitration_id, data=integrity.seal(imu.frame_id, data, 7),
+                           is_extended_id=False)
+
+    daemon, player, capture = session(mutate=saturate)
+    time.sleep(4.0)
+    assert daemon.terminate() == 0
+    assert 80 <= summary_value(daemon.stderr, "rejected_out_of_range") <= 101
+    yaw = read_table(tmp_path / "live.csv")["yaw_rate"]
+    assert np.degrees(np.nanmax(np.abs(yaw))) < 30.0, "the out-of-range yaw rate reached the estimate"
+
+
+def test_clock_steps_forward_and_back_reanchor_the_ticks(session, tmp_path):
+    daemon, player, capture = session()
+    time.sleep(1.5)
+    subprocess.run(["date", "-s", "@%.3f" % (time.time() + 3600)], check=True, capture_output=True)
+    time.sleep(1.5)
+    subprocess.run(["date", "-s", "@%.3f" % (time.time() - 3600)], check=True, capture_output=True)
+    time.sleep(1.5)
+    assert daemon.alive()
+    after = statuses(capture.stop(), time.time() - 0.8)
+    assert daemon.terminate() == 0
+    assert summary_value(daemon.stderr, "time_jumps") >= 2
+    assert after and all(s["Mode"] == 1 for s in after[-20:]), "estimating normally after both steps"
+    t = read_table(tmp_path / "live.csv")["t"]
+    assert np.abs(np.diff(t)).max() > 3000 and np.sum(np.abs(np.diff(t)) > 0.05) <= 4

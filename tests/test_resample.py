@@ -40,3 +40,18 @@ def test_a_long_gap_reanchors_instead_of_catching_up():
     assert clock.jumps == 1
     assert clock.next_tick == 100.0
     assert not math.isinf(clock.next_tick)
+
+
+def test_a_clock_step_back_reanchors_instead_of_waiting():
+    clock = TickClock(0.01, max_gap=1.0)
+    list(clock.due(100.0))
+    list(clock.due(100.5))
+    assert list(clock.due(90.0)) == [] and clock.jumps == 1
+    assert list(clock.due(90.025)) == pytest.approx([90.0, 90.01, 90.02])
+
+
+def test_small_reordering_does_not_reanchor():
+    clock = TickClock(0.01, max_gap=1.0)
+    list(clock.due(5.0))
+    list(clock.due(5.1))
+    assert list(clock.due(5.05)) == [] and clock.jumps == 0
