@@ -6,7 +6,7 @@ import signal
 import sys
 
 from canest import __version__
-from canest.commands import check, compare, demo, evaluate, monitor, replay, run, simulate
+from canest.commands import batch, check, compare, demo, evaluate, monitor, replay, run, simulate
 from canest.config import ConfigError
 from canest.buslink import BusOpenError
 
@@ -28,7 +28,7 @@ def build_parser() -> argparse.ArgumentParser:
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--version", action="version", version=f"canest {__version__}")
     subparsers = parser.add_subparsers(title="commands", metavar="COMMAND", required=True)
-    for command in (demo, run, monitor, replay, simulate, evaluate, compare, check):
+    for command in (demo, run, monitor, replay, simulate, evaluate, compare, batch, check):
         command.register(subparsers)
     return parser
 

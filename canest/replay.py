@@ -6,6 +6,7 @@ Readers and writers are python-can's, chosen by file suffix (.log candump,
 from __future__ import annotations
 
 import os
+import struct
 import time
 from contextlib import ExitStack
 from pathlib import Path
@@ -43,6 +44,21 @@ def _byte_position(reader):
     return handle.tell
 
 
+def _frames(reader, log_path):
+    """The reader's frames; a frame it cannot parse ends the replay with the file and frame number."""
+    count = 0
+    iterator = iter(reader)
+    while True:
+        try:
+            msg = next(iterator)
+        except StopIteration:
+            return
+        except (ValueError, IndexError, KeyError, struct.error) as exc:
+            raise ValueError(f"{log_path}: frame {count + 1} is unreadable ({type(exc).__name__}: {exc})") from None
+        count += 1
+        yield msg
+
+
 def replay(config: Config, log_path, out_log=None, out_csv=None, progress: bool = True, on_estimate=None,
            step_times=None) -> dict:
     """Run a log through the pipeline as fast as possible; return the frame summary.
@@ -58,7 +74,7 @@ def replay(config: Config, log_path, out_log=None, out_csv=None, progress: bool 
         bar = stack.enter_context(tqdm(total=os.path.getsize(log_path), unit="B", unit_scale=True,
                                        desc=f"replay {Path(log_path).name}", disable=None if progress else True, leave=False))
         position = _byte_position(reader)
-        for count, msg in enumerate(reader, 1):
+        for count, msg in enumerate(_frames(reader, log_path), 1):
             for estimate in pipeline.feed(msg):
                 if csv_writer:
                     csv_writer.write(estimate)

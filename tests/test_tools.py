@@ -17,3 +17,8 @@ def test_filter_benchmark_prints_every_filter():
     rows = {line.split()[0]: line.split() for line in out.splitlines()[1:] if line and line.split()[0] in FILTERS}
     assert set(rows) == set(FILTERS)
     assert all(float(row[1]) > 0 for row in rows.values())
+
+
+def test_fleet_benchmark_smoke_run():
+    out = run_tool(ROOT / "tools" / "bench" / "fleet.py", "--logs", "2", "--seconds", "2", "--workers", "1")
+    assert "drive-h/min" in out and out.strip().splitlines()[-1].split()[0] == "1"
