@@ -2,9 +2,13 @@
 
 Ticks follow the receive timestamps of the frames (the kernel's on SocketCAN),
 exactly as replay follows log timestamps, so a log played onto a bus gives the
-estimates an offline replay of it gives. When the bus is idle, ticks still
-happen ``IDLE_MARGIN`` behind the wall clock so stale inputs are noticed and
-the outputs lose their validity bits.
+estimates an offline replay of it gives. The loop waits for frames only until
+the next tick is due (plus ``TICK_MARGIN``): when the socket has been empty
+that long, every frame stamped before the tick has been read, so the tick runs
+at once instead of waiting for a later frame. This bounds the input-to-output
+latency to about ``TICK_MARGIN`` plus the processing time, keeps ticking on an
+idle bus (stale inputs lose their validity bits), and leaves the estimates
+identical to replay's.
 
 What the loop guarantees:
 
@@ -38,7 +42,7 @@ from canest.pipeline import Pipeline, format_summary
 
 log = logging.getLogger("canest.service")
 
-IDLE_MARGIN = 0.05  # s behind the wall clock before an idle tick is run
+TICK_MARGIN = 0.001  # s after a tick's time before it runs without a later frame
 STATUS_EVERY = 10.0  # s between status log lines
 NOTIFY_STATUS_EVERY = 1.0  # s between STATUS= updates to systemd
 LATENCY_WINDOW = 10_000  # send latencies kept for percentiles, cleared at every status line
@@ -108,15 +112,14 @@ class Service:
         self._open()
         log.info("estimating: %s -> %s, filter %s at %.0f Hz", self.config.input_bus.channel,
                  self.config.output_bus.channel, self.config.estimator.filter, self.config.estimator.rate_hz)
-        dt = 1.0 / self.config.estimator.rate_hz
         clock = _Schedule(self.notifier.watchdog_interval)
         try:
             while not self.stopping.is_set():
-                msg = self.inputs.recv(dt)
+                msg = self.inputs.recv(self._wait())
                 if msg is not None:
                     estimates = self.pipeline.feed(msg)
                 else:
-                    estimates = self.pipeline.advance(time.time() - IDLE_MARGIN)
+                    estimates = self.pipeline.advance(time.time() - TICK_MARGIN)
                 if estimates:
                     self._publish(estimates)
                 self._housekeeping(clock)
@@ -124,6 +127,12 @@ class Service:
             self._close()
             self.notifier.notify(STOPPING=1)
         return self.summary()
+
+    def _wait(self) -> float:
+        """Seconds to wait for a frame: until the next tick is due, at most one tick period."""
+        period = 1.0 / self.config.estimator.rate_hz
+        due = self.pipeline.clock.next_tick + TICK_MARGIN - time.time()
+        return min(max(due, 0.0), period)
 
     def _housekeeping(self, clock: "_Schedule") -> None:
         now = time.monotonic()

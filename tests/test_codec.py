@@ -36,7 +36,7 @@ def test_encode_decode_roundtrip_within_dbc_resolution(name):
 
 
 def test_crc8_sae_j1850_check_value():
-    assert integrity._CRC8.checksum(b"123456789") == 0x4B
+    assert integrity._crc8(b"123456789") == 0x4B
 
 
 @pytest.fixture

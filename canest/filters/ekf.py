@@ -20,7 +20,6 @@ through past steps is neglected), and clipped to ``THETA_BOUNDS``.
 from __future__ import annotations
 
 import numpy as np
-import scipy.linalg
 
 from canest.filters.base import GaussianFilter, Measurement, Transition, symmetrize
 
@@ -76,6 +75,6 @@ class DualExtendedKalmanFilter(ExtendedKalmanFilter):
         C = measurement.parameter_jacobian(self.x, u)
         residual = z - measurement.h(self.x[None, :], u)[0]
         S = self.theta_var * np.outer(C, C) + R
-        gain = self.theta_var * scipy.linalg.solve(S, C, assume_a="pos")
+        gain = self.theta_var * np.linalg.solve(S, C)
         self.theta = float(np.clip(self.theta + gain @ residual, *THETA_BOUNDS))
         self.theta_var = max(self.theta_var * (1.0 - gain @ C), 1e-12)

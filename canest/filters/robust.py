@@ -31,7 +31,6 @@ outlier both a narrow kernel and a large residual.
 from __future__ import annotations
 
 import numpy as np
-import scipy.linalg
 
 from canest.filters.base import Measurement
 from canest.filters.sqrt import SquareRootCubatureKalmanFilter
@@ -60,13 +59,13 @@ class MaximumCorrentropySCKF(SquareRootCubatureKalmanFilter):
         y = z - z_hat
         sqrt_R = self.cholesky(R)
         Pzz = Zc @ Zc.T + R
-        eta = float(y @ scipy.linalg.solve(Pzz, y, assume_a="pos"))
+        eta = float(y @ np.linalg.solve(Pzz, y))
         sigma = self.kernel_width(eta, y.size)
-        H = scipy.linalg.solve(self.P, Xc @ Zc.T, assume_a="pos").T
+        H = np.linalg.solve(self.P, Xc @ Zc.T).T
         prior = self.x
         x_t = prior
         for self.iterations in range(1, self.max_iterations + 1):
-            e = scipy.linalg.solve_triangular(sqrt_R, y - H @ (x_t - prior), lower=True)
+            e = np.linalg.solve(sqrt_R, y - H @ (x_t - prior))
             weights = np.maximum(np.exp(-e**2 / (2.0 * sigma**2)), MIN_WEIGHT)
             sqrt_R_tilde = sqrt_R / np.sqrt(weights)  # columns scaled: S_R C^-1/2
             Szz = self._innovation_root(Zc, sqrt_R_tilde)
