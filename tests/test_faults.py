@@ -304,3 +304,11 @@ def test_clock_steps_forward_and_back_reanchor_the_ticks(session, tmp_path):
     assert after and all(s["Mode"] == 1 for s in after[-20:]), "estimating normally after both steps"
     t = read_table(tmp_path / "live.csv")["t"]
     assert np.abs(np.diff(t)).max() > 3000 and np.sum(np.abs(np.diff(t)) > 0.05) <= 4
+
+
+def test_live_benchmark_smoke_run_on_vcan():
+    out = subprocess.run([sys.executable, str(ROOT / "tools" / "bench" / "live.py"), "--bus", "vcan", "--seconds",
+                          "1", "--multipliers", "1"], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    last = out.stdout.strip().splitlines()[-1].split()
+    assert last[0] == "1x" and int(last[3]) == 0

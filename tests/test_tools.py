@@ -22,3 +22,16 @@ def test_filter_benchmark_prints_every_filter():
 def test_fleet_benchmark_smoke_run():
     out = run_tool(ROOT / "tools" / "bench" / "fleet.py", "--logs", "2", "--seconds", "2", "--workers", "1")
     assert "drive-h/min" in out and out.strip().splitlines()[-1].split()[0] == "1"
+
+
+def test_replay_benchmark_smoke_run():
+    out = run_tool(ROOT / "tools" / "bench" / "replay.py", "--minutes", "0.1", "--hours", "0.005", "--filters", "ckf")
+    lines = out.strip().splitlines()
+    assert lines[2].startswith("ckf") and float(lines[2].split()[4]) > 1.0  # faster than real time
+    assert lines[-1].startswith("memory over")
+
+
+def test_live_benchmark_smoke_run_on_virtual_buses():
+    out = run_tool(ROOT / "tools" / "bench" / "live.py", "--bus", "virtual", "--seconds", "1", "--multipliers", "1")
+    last = out.strip().splitlines()[-1].split()
+    assert last[0] == "1x" and int(last[3]) == 0  # nothing dropped at nominal rate

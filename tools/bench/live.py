@@ -66,13 +66,13 @@ def virtual(config, frames, multipliers):
     time.sleep(0.3)
     print("virtual bus, in process (CPU: the whole process, player included)\n" + HEADER)
     for multiplier in multipliers:
-        before = service.summary()["frames"]
+        before = service.summary().get("frames", 0)
         service.latency.clear()
         cpu0, wall0 = time.process_time(), time.perf_counter()
         sent = play_messages(frames, player, speed=multiplier)
         time.sleep(0.3)
         cpu = (time.process_time() - cpu0) / (time.perf_counter() - wall0)
-        received = service.summary()["frames"] - before
+        received = service.summary().get("frames", 0) - before
         print(row(multiplier, sent, received, percentiles(np.array(service.latency) * 1e3), cpu, rss_mb()),
               flush=True)
     service.stop()
