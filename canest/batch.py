@@ -186,8 +186,8 @@ def run_batch(config: Config, patterns, out: Path, filters, scheduler=None, work
 
     out.mkdir(parents=True, exist_ok=True)
     tasks = plan(find_logs(patterns), filters, out)
-    print_fingerprint = fingerprint(config)
-    finished = {task: complete(task, print_fingerprint) for task in tasks}
+    config_fingerprint = fingerprint(config)
+    finished = {task: complete(task, config_fingerprint) for task in tasks}
     rows = [row for row in finished.values() if row is not None]
     todo = [task for task, row in finished.items() if row is None]
     report(f"{len(tasks)} tasks ({len(tasks) // len(filters)} logs x {len(filters)} filters): "
@@ -199,7 +199,7 @@ def run_batch(config: Config, patterns, out: Path, filters, scheduler=None, work
         client = Client(scheduler or cluster)
         try:
             report(f"dask scheduler {client.scheduler.address}, dashboard {client.dashboard_link}")
-            futures = {client.submit(run_task, config, task, print_fingerprint, retries=retries, pure=False): task
+            futures = {client.submit(run_task, config, task, config_fingerprint, retries=retries, pure=False): task
                        for task in todo}
             for future in tqdm(as_completed(futures), total=len(futures), unit="task", disable=not progress):
                 task = futures[future]

@@ -189,6 +189,22 @@ class Estimator:
         dX = rates(X, u)
         return np.column_stack([self.model.measure(X - ages[j] * dX, u)[:, j] for j in np.flatnonzero(mask)])
 
+    def _update(self, inputs: _Inputs, u: np.ndarray, lateral_ok: bool, t: float) -> bool:
+        """Measurement update with the fresh samples; True if the filter has diverged."""
+        mask = np.array([
+            lateral_ok and inputs.any_fresh("ay"),
+            inputs.has("yaw_rate") and inputs.any_fresh("yaw_rate"),
+            inputs.has(*WHEEL_SPEEDS) and inputs.any_fresh(*WHEEL_SPEEDS),
+        ])
+        if not mask.any():
+            return False
+        z = np.array([inputs.values["ay"], inputs.values["yaw_rate"],
+                      self._wheel_speed(inputs) if mask[2] else 0.0])[mask]
+        ages = np.array([inputs.ages["ay"], inputs.ages["yaw_rate"],
+                         float(np.mean([inputs.ages[w] for w in WHEEL_SPEEDS]))])
+        self.filter.update(z, self._measurement(mask, ages), u, np.diag(self.r_std[mask] ** 2))
+        return self._diverged(t)
+
     def step(self, t: float) -> Estimate:
         inputs = self._inputs(t)
         missing = self._missing(inputs)
@@ -203,20 +219,7 @@ class Estimator:
         started = time.perf_counter()
         self.filter.predict(self.transitions[self.low_speed], u, self.dt, np.diag(self.q_density * self.dt))
         lateral_ok = not self.low_speed and inputs.has("steering_wheel_angle", "ay")
-        mask = np.array([
-            lateral_ok and inputs.any_fresh("ay"),
-            inputs.has("yaw_rate") and inputs.any_fresh("yaw_rate"),
-            inputs.has(*WHEEL_SPEEDS) and inputs.any_fresh(*WHEEL_SPEEDS),
-        ])
-        if mask.any():
-            z = np.array([inputs.values["ay"], inputs.values["yaw_rate"],
-                          self._wheel_speed(inputs) if mask[2] else 0.0])[mask]
-            ages = np.array([inputs.ages.get("ay", 0.0), inputs.ages["yaw_rate"],
-                             float(np.mean([inputs.ages[w] for w in WHEEL_SPEEDS]))])
-            self.filter.update(z, self._measurement(mask, ages), u, np.diag(self.r_std[mask] ** 2))
-            diverged = self._diverged(t)
-        else:
-            diverged = False
+        diverged = self._update(inputs, u, lateral_ok, t)
         if self.step_times is not None:
             self.step_times.append(time.perf_counter() - started)
         if diverged or not (np.all(np.isfinite(self.filter.x)) and np.all(np.isfinite(self.filter.P))):
