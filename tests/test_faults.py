@@ -312,3 +312,36 @@ def test_live_benchmark_smoke_run_on_vcan():
     assert out.returncode == 0, out.stderr
     last = out.stdout.strip().splitlines()[-1].split()
     assert last[0] == "1x" and int(last[3]) == 0
+
+
+def test_a_diverging_filter_is_reset_and_reported_in_the_status(config, tmp_path):
+    """The simulated car spins (lane change at 50 km/h on mu 0.3): the daemon resets, counts it in the
+    status message and stops calling the sideslip valid, and keeps running."""
+    from canest.sim.simulate import simulate
+
+    spin = simulate(config, "dlc", 50.0, 0.3, seed=1)
+    capture = Capture()
+    daemon = Daemon(tmp_path / "spin.csv")
+    player = Player(spin.frames, loops=1)
+    player.start()
+    player.join(timeout=60)
+    time.sleep(0.5)
+    frames = capture.stop()
+    assert daemon.alive() and daemon.terminate() == 0
+    status = statuses(frames)
+    assert status[-1]["ResetCount"] >= 1 and summary_value(daemon.stderr, "resets") >= 1
+    after_reset = [s for s in status if s["ResetCount"] >= 1]
+    assert after_reset[0]["Mode"] == 3 and not after_reset[0]["ValidFlags"] & BETA_VALID
+    assert "filter diverged" in daemon.stderr
+
+
+def test_a_wrong_config_exits_before_opening_the_bus(tmp_path):
+    bad = tmp_path / "bad.yaml"
+    bad.write_text((ROOT / "configs" / "dici_ev.yaml").read_text().replace("ESC_IMU.YawRate", "ESC_IMU.Yaw"))
+    watcher = can.Bus(interface="socketcan", channel="vcan1")
+    result = subprocess.run([sys.executable, "-m", "canest", "run", "--config", str(bad)], capture_output=True,
+                            text=True, timeout=60)
+    sent = watcher.recv(timeout=0.5)
+    watcher.shutdown()
+    assert result.returncode == 2 and sent is None
+    assert result.stderr.strip().count("\n") == 0 and "input.signals.yaw_rate.signal" in result.stderr
