@@ -4,7 +4,6 @@ import time
 
 import can
 import numpy as np
-import pytest
 
 from canest.config import BusConfig
 from canest.demo import run_demo

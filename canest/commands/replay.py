@@ -3,12 +3,10 @@ from __future__ import annotations
 
 import sys
 
-import can
-
+from canest.buslink import open_bus
 from canest.commands.common import FORMATTER, add_bus_overrides, add_config, config_from_args
 from canest.pipeline import format_summary
 from canest.replay import play, replay
-from canest.buslink import open_bus
 
 EPILOG = """examples:
   canest replay drive.log --out est.log --csv est.csv

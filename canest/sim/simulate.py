@@ -18,7 +18,7 @@ from canest.codec import InputEncoder
 from canest.config import Config
 from canest.signals import WHEELS
 from canest.sim.maneuvers import Driver, make_maneuver
-from canest.sim.plant import AXL, PSI, R, VX, VY, W, X, Y, TwoTrackPlant
+from canest.sim.plant import PSI, R, VX, VY, W, X, Y, TwoTrackPlant
 from canest.sim.sensors import SensorModel
 
 PLANT_DT = 0.001
@@ -58,8 +58,8 @@ def simulate(config: Config, maneuver: str, speed_kmh: float, mu, *, duration=No
     encoder = InputEncoder(config)
     state = plant.initial_state(speed)
     state[X] = plan.start_x
-    schedule = [(float(rng.uniform(0, (m.cycle_time or 10) / 1000.0)), m.frame_id, (m.cycle_time or 10) / 1000.0)
-                for m in encoder.messages]
+    cycles = {m.frame_id: m.cycle_time / 1000.0 if m.cycle_time else DEFAULT_CYCLE for m in encoder.messages}
+    schedule = [(float(rng.uniform(0, cycle)), frame_id, cycle) for frame_id, cycle in cycles.items()]
     heapq.heapify(schedule)
     steps = int(round(plan.duration / PLANT_DT))
     control_every = int(round(CONTROL_DT / PLANT_DT))
