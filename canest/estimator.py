@@ -102,7 +102,7 @@ class Estimator:
         self.resampler = resampler
         self.dt = 1.0 / self.est.rate_hz
         names = ("yaw_rate", "beta", "vx")
-        self.q_density = np.array([self.est.process_noise[n] for n in names]) ** 2
+        self.Q = np.diag(np.array([self.est.process_noise[n] for n in names]) ** 2 * self.dt)  # per tick
         self.p0 = np.diag(np.array([self.est.initial_std[n] for n in names]) ** 2)
         self.r_std = np.array([self.est.measurement_noise[n] for n in ("ay", "yaw_rate", "vx_wheel")])
         self.filter = None
@@ -124,10 +124,10 @@ class Estimator:
 
     def _diverged(self, t: float) -> bool:
         self.recent_nis.append(self.filter.nis)
-        if len(self.recent_nis) < DIVERGENCE_WINDOW or np.mean(self.recent_nis) <= DIVERGENCE_NIS:
+        mean_nis = sum(self.recent_nis) / DIVERGENCE_WINDOW
+        if len(self.recent_nis) < DIVERGENCE_WINDOW or mean_nis <= DIVERGENCE_NIS:
             return False
-        log.warning("filter diverged (mean NIS %.0f over %d updates): reset", np.mean(self.recent_nis),
-                    DIVERGENCE_WINDOW)
+        log.warning("filter diverged (mean NIS %.0f over %d updates): reset", mean_nis, DIVERGENCE_WINDOW)
         self.suspect_until = t + DIVERGENCE_HOLD
         return True
 
@@ -142,7 +142,7 @@ class Estimator:
                      if any(m in inputs.values and inputs.stale[m] for m in members))
 
     def _wheel_speed(self, inputs: _Inputs) -> float:
-        return self.vehicle.wheel_radius * float(np.mean([inputs.values[w] for w in WHEEL_SPEEDS]))
+        return self.vehicle.wheel_radius * sum(inputs.values[w] for w in WHEEL_SPEEDS) / len(WHEEL_SPEEDS)
 
     def _start(self, inputs: _Inputs) -> bool:
         if not inputs.has("yaw_rate", *WHEEL_SPEEDS):
@@ -201,7 +201,7 @@ class Estimator:
         z = np.array([inputs.values["ay"], inputs.values["yaw_rate"],
                       self._wheel_speed(inputs) if mask[2] else 0.0])[mask]
         ages = np.array([inputs.ages["ay"], inputs.ages["yaw_rate"],
-                         float(np.mean([inputs.ages[w] for w in WHEEL_SPEEDS]))])
+                         sum(inputs.ages[w] for w in WHEEL_SPEEDS) / len(WHEEL_SPEEDS)])
         self.filter.update(z, self._measurement(mask, ages), u, np.diag(self.r_std[mask] ** 2))
         return self._diverged(t)
 
@@ -217,7 +217,7 @@ class Estimator:
         steering = inputs.values.get("steering_wheel_angle", 0.0)
         u = np.array([steering / self.vehicle.steering_ratio, inputs.values["ax"] if inputs.has("ax") else 0.0, 1.0])
         started = time.perf_counter()
-        self.filter.predict(self.transitions[self.low_speed], u, self.dt, np.diag(self.q_density * self.dt))
+        self.filter.predict(self.transitions[self.low_speed], u, self.dt, self.Q)
         lateral_ok = not self.low_speed and inputs.has("steering_wheel_angle", "ay")
         diverged = self._update(inputs, u, lateral_ok, t)
         if self.step_times is not None:
