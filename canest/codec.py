@@ -15,9 +15,10 @@ import can
 
 from canest import integrity
 from canest.config import Config, ConfigError, MessageChecks, load_database
+from canest.plausibility import SlewLimit
 
 
-def _clamp(signal, value: float) -> float:
+def clamp_to_signal(signal, value: float) -> float:
     """Limit a physical value to the signal's DBC range."""
     low = signal.minimum if signal.minimum is not None else -math.inf
     high = signal.maximum if signal.maximum is not None else math.inf
@@ -52,7 +53,8 @@ class InputDecoder:
     (a frozen sender); an increment of 2 or 3 is accepted and counted as lost
     frames; a larger jump is rejected (``counter_sequence``) and the new
     value becomes the reference, so a sender that restarted is followed from
-    its next frame on.
+    its next frame on. Last, values that change faster than physics allows
+    are rejected (``implausible``, :mod:`canest.plausibility`).
     """
 
     def __init__(self, config: Config):
@@ -64,6 +66,7 @@ class InputDecoder:
         for name, specs in by_message.items():
             message = self.database.get_message_by_name(name)
             self.plans[message.frame_id] = _MessagePlan(message, specs, config.messages.get(name), config.path)
+        self.plausible = SlewLimit(config.signals)
         self.counts = Counter()
 
     @property
@@ -126,6 +129,8 @@ class InputDecoder:
                     (signal.maximum is not None and raw > signal.maximum + 1e-9):
                 return self._reject("out_of_range")
             out.append((spec.canonical, spec.factor * raw + spec.offset))
+        if not self.plausible.accept(out, msg.timestamp):
+            return self._reject("implausible")
         self.counts["decoded"] += 1
         return out
 
@@ -152,11 +157,11 @@ class InputEncoder:
         for signal in message.signals:
             if signal.multiplexer_ids and page not in signal.multiplexer_ids:
                 continue
-            values[signal.name] = page if signal.is_multiplexer else _clamp(signal, 0.0)
+            values[signal.name] = page if signal.is_multiplexer else clamp_to_signal(signal, 0.0)
         for spec in plan.specs:
             if spec.signal in values and spec.canonical in si_values:
                 raw = (si_values[spec.canonical] - spec.offset) / spec.factor
-                values[spec.signal] = _clamp(plan.signal_by_name[spec.signal], raw)
+                values[spec.signal] = clamp_to_signal(plan.signal_by_name[spec.signal], raw)
         checks = plan.checks
         if checks.counter:
             values[checks.counter] = self.counters[frame_id]

@@ -14,7 +14,7 @@ from collections import Counter
 import can
 
 from canest import integrity
-from canest.outputs import OUTPUT_MESSAGES, STATUS_MESSAGE
+from canest.outputs import OUTPUT_MESSAGES, STATUS_MESSAGE, integrity_signals
 from canest.signals import INPUT_GROUPS
 
 # (label, message, signal stem, display unit, factor from SI)
@@ -33,6 +33,11 @@ class Monitor:
     def __init__(self, database):
         self.database = database
         self.messages = {m.frame_id: m for m in database.messages if m.name in (*OUTPUT_MESSAGES, STATUS_MESSAGE)}
+        # per frame ID: (counter signal name, counter modulus, checksum byte), as the sender sets them
+        self.integrity = {}
+        for frame_id, message in self.messages.items():
+            counter, checksum = integrity_signals(message)
+            self.integrity[frame_id] = (counter.name, 2 ** counter.length, integrity.checksum_byte(checksum))
         self.latest = {}
         self.counts = Counter()
         self.counters = {}
@@ -44,13 +49,14 @@ class Monitor:
             self.counts["foreign"] += 1
             return
         self.counts["frames"] += 1
-        if not integrity.checksum_ok(msg.arbitration_id, msg.data, 7):
+        counter_name, modulus, crc_index = self.integrity[msg.arbitration_id]
+        if not integrity.checksum_ok(msg.arbitration_id, msg.data, crc_index):
             self.counts["crc_errors"] += 1
             return
         values = message.decode(msg.data, decode_choices=True)
-        counter = next(int(v) for k, v in values.items() if k.endswith("_Counter"))
+        counter = int(values[counter_name])
         last = self.counters.get(message.name)
-        if last is not None and (counter - last) % 16 != 1:
+        if last is not None and (counter - last) % modulus != 1:
             self.counts["counter_gaps"] += 1
         self.counters[message.name] = counter
         self.latest[message.name] = values

@@ -16,6 +16,7 @@ import math
 import can
 
 from canest import integrity
+from canest.codec import clamp_to_signal
 from canest.config import load_database
 from canest.estimator import Estimate
 from canest.signals import WHEELS
@@ -43,8 +44,11 @@ OUTPUT_MESSAGES = {
 STATUS_MESSAGE = "CE_Status"
 
 
-def _clamp(signal, value: float) -> float:
-    return min(max(value, signal.minimum), signal.maximum)
+def integrity_signals(message):
+    """The rolling counter and checksum signals of an output message (``*_Counter``, ``*_CRC``)."""
+    counter = next(s for s in message.signals if s.name.endswith("_Counter"))
+    checksum = next(s for s in message.signals if s.name.endswith("_CRC"))
+    return counter, checksum
 
 
 class _Sender:
@@ -53,8 +57,7 @@ class _Sender:
     def __init__(self, message):
         self.message = message
         self.signals = {s.name: s for s in message.signals}
-        counter = next(s for s in message.signals if s.name.endswith("_Counter"))
-        checksum = next(s for s in message.signals if s.name.endswith("_CRC"))
+        counter, checksum = integrity_signals(message)
         self.counter_name, self.counter_modulus = counter.name, 2 ** counter.length
         self.crc_name, self.crc_index = checksum.name, integrity.checksum_byte(checksum)
         self.counter = 0
@@ -91,7 +94,7 @@ class EstimateEncoder:
             for signal_name, (kind, key) in fields.items():
                 if kind == "value":
                     value = estimate.values[key]
-                    values[signal_name] = _clamp(sender.signals[signal_name], value) if math.isfinite(value) else 0.0
+                    values[signal_name] = clamp_to_signal(sender.signals[signal_name], value) if math.isfinite(value) else 0.0
                 else:
                     finite = math.isfinite(estimate.values[key])
                     values[signal_name] = int(bool(estimate.valid.get(key, False)) and finite)
@@ -103,7 +106,7 @@ class EstimateEncoder:
             "ValidFlags": estimate.valid_flags,
             "MissingInputs": estimate.missing_mask,
             "ResetCount": min(estimate.resets, 255),
-            "InnovationNis": _clamp(status.signals["InnovationNis"], estimate.nis),
+            "InnovationNis": clamp_to_signal(status.signals["InnovationNis"], estimate.nis),
         }, estimate.t, self.channel))
         return frames
 

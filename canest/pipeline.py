@@ -16,7 +16,6 @@ from canest.codec import InputDecoder
 from canest.config import Config
 from canest.estimator import Estimator
 from canest.outputs import EstimateEncoder
-from canest.plausibility import SlewLimit
 from canest.resample import Resampler, TickClock
 
 DEFAULT_CYCLE_TIME = 0.1  # s, for messages whose DBC gives no GenMsgCycleTime
@@ -40,7 +39,6 @@ class Pipeline:
         self.resampler = Resampler(config.signals, input_timeouts(config, self.decoder))
         self.estimator = Estimator(config, self.resampler)
         self.encoder = EstimateEncoder(config.output_dbc, output_channel)
-        self.plausible = SlewLimit(config.signals)
         self.clock = TickClock(1.0 / config.estimator.rate_hz)
         self.counts = Counter()
         self.last_time = None
@@ -61,10 +59,6 @@ class Pipeline:
         values = self.decoder.decode(msg)
         estimates = self._ticks(t)
         if values:
-            if not self.plausible.accept(values, t):
-                self.decoder.counts["decoded"] -= 1
-                self.decoder.counts["rejected_implausible"] += 1
-                return estimates
             for name, value in values:
                 self.resampler.hold(name, value, t)
         return estimates

@@ -5,12 +5,10 @@ tests are skipped with the reason, unless CANEST_REQUIRE_SOCKETCAN=1 (set by
 ``make test`` inside the UML guest), where a missing bus is a failure: CI
 must never pass with the real-vcan tests skipped.
 """
-import csv
 import os
 import socket
 from pathlib import Path
 
-import can
 import pytest
 
 from canest.config import load_config
@@ -50,13 +48,8 @@ def config():
 
 
 def write_log_and_truth(sim, log_path, truth_path):
-    with can.Logger(str(log_path)) as writer:
-        for frame in sim.frames:
-            writer.on_message_received(frame)
-    with open(truth_path, "w", newline="") as handle:
-        writer = csv.writer(handle)
-        writer.writerow(list(sim.truth))
-        writer.writerows(zip(*sim.truth.values()))
+    sim.write_log(log_path)
+    sim.write_truth(truth_path)
 
 
 @pytest.fixture(scope="session")

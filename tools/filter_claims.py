@@ -16,7 +16,6 @@ import sys
 import tempfile
 from pathlib import Path
 
-import can
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
@@ -32,9 +31,7 @@ TABLES = [("dlc", 80, 0.85), ("sine", 80, 0.85), ("sine", 50, 0.3)]
 def simulated_log(config, folder, maneuver, speed, mu, seed, outliers=0.0):
     sim = simulate(config, maneuver, speed, mu, seed=seed, outliers=outliers)
     path = Path(folder) / f"{maneuver}_{speed}_{mu}_{seed}_{outliers}.log"
-    with can.Logger(str(path)) as writer:
-        for frame in sim.frames:
-            writer.on_message_received(frame)
+    sim.write_log(path)
     return path, sim.truth
 
 

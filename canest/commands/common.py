@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import argparse
-import csv
 
 from canest.config import DEFAULT_CONFIG, BusConfig, load_config
 
@@ -36,10 +35,3 @@ def config_from_args(args):
             args.output_channel or config.output_bus.channel, config.output_bus.options))
     return config
 
-
-def write_truth(path, truth: dict) -> None:
-    names = list(truth)
-    with open(path, "w", newline="") as handle:
-        writer = csv.writer(handle)
-        writer.writerow(names)
-        writer.writerows(zip(*(truth[n] for n in names)))

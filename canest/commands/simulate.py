@@ -3,10 +3,9 @@ from __future__ import annotations
 
 import sys
 
-import can
 from tqdm import tqdm
 
-from canest.commands.common import FORMATTER, add_config, config_from_args, write_truth
+from canest.commands.common import FORMATTER, add_config, config_from_args
 from canest.sim.maneuvers import MANEUVERS
 from canest.sim.simulate import simulate
 
@@ -60,10 +59,8 @@ def run(args) -> int:
                           seed=args.seed, noise_scale=args.noise_scale, outliers=args.outliers,
                           start_time=args.start_time, channel=config.input_bus.channel,
                           progress=lambda f: bar.update(round(100 * f) - bar.n))
-    with can.Logger(args.out) as writer:
-        for frame in result.frames:
-            writer.on_message_received(frame)
-    write_truth(args.truth, result.truth)
+    result.write_log(args.out)
+    result.write_truth(args.truth)
     duration = result.truth["t"][-1] - result.truth["t"][0]
     print(f"wrote {len(result.frames)} frames ({duration:.1f} s) to {args.out} and truth to {args.truth}")
     return 0

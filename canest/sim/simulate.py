@@ -8,10 +8,12 @@ sampled every ``TRUTH_DT``. Times are seconds on the log's clock, starting at
 """
 from __future__ import annotations
 
+import csv
 import heapq
 import math
 from dataclasses import dataclass
 
+import can
 import numpy as np
 
 from canest.codec import InputEncoder
@@ -34,6 +36,19 @@ TRUTH_COLUMNS = ("t", "vx", "vy", "beta", "yaw_rate", "ax", "ay", "delta", "stee
 class Simulation:
     frames: list  # can.Message, in time order
     truth: dict  # column -> np.ndarray, see TRUTH_COLUMNS
+
+    def write_log(self, path) -> None:
+        """The frames as a CAN log, its format chosen by python-can from the suffix."""
+        with can.Logger(str(path)) as writer:
+            for frame in self.frames:
+                writer.on_message_received(frame)
+
+    def write_truth(self, path) -> None:
+        """The truth as a CSV with a header of TRUTH_COLUMNS."""
+        with open(path, "w", newline="") as handle:
+            writer = csv.writer(handle)
+            writer.writerow(list(self.truth))
+            writer.writerows(zip(*self.truth.values()))
 
 
 def _true_inputs(state, outputs, swa, torque) -> dict:

@@ -21,7 +21,6 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 from canest.batch import run_batch  # noqa: E402
 from canest.config import DEFAULT_CONFIG, load_config  # noqa: E402
 from canest.sim.simulate import simulate  # noqa: E402
-from tests.conftest import write_log_and_truth  # noqa: E402
 
 
 def main():
@@ -36,7 +35,8 @@ def main():
         for i in range(args.logs):
             sim = simulate(config, "sine" if i % 2 else "slalom", 80.0, 0.85, seed=i, duration=args.seconds)
             (root / "logs").mkdir(exist_ok=True)
-            write_log_and_truth(sim, root / "logs" / f"d{i:03d}.log", root / "logs" / f"d{i:03d}.truth.csv")
+            sim.write_log(root / "logs" / f"d{i:03d}.log")
+            sim.write_truth(root / "logs" / f"d{i:03d}.truth.csv")
         hours = args.logs * args.seconds / 3600.0
         base = None
         print(f"{args.logs} logs x {args.seconds:g} s = {hours:.3f} drive-hours")

@@ -15,7 +15,6 @@ timestamps through one pipeline and samples the resident memory (of the
 whole benchmark process, interpreter and libraries included).
 """
 import argparse
-import dataclasses
 import os
 import sys
 import tempfile
@@ -27,6 +26,7 @@ import can
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
+from canest.compare import with_filter  # noqa: E402
 from canest.config import DEFAULT_CONFIG, load_config  # noqa: E402
 from canest.outputs import EstimateCsvWriter  # noqa: E402
 from canest.pipeline import Pipeline  # noqa: E402
@@ -60,11 +60,6 @@ class Stopwatch:
             finally:
                 self.seconds[stage] += time.perf_counter() - started
             yield item
-
-
-def with_filter(config, name):
-    return dataclasses.replace(config, estimator=dataclasses.replace(config.estimator, filter=name,
-                                                                     factorization=None, filter_options={}))
 
 
 def timed_replay(config, log_path, folder):
@@ -122,9 +117,7 @@ def main():
         started = time.perf_counter()
         sim = simulate(config, "slalom", 80.0, 0.85, seed=1, duration=args.minutes * 60)
         log_path = folder / "drive.log"
-        with can.Logger(str(log_path)) as writer:
-            for frame in sim.frames:
-                writer.on_message_received(frame)
+        sim.write_log(log_path)
         drive = sim.frames[-1].timestamp - sim.frames[0].timestamp
         print(f"drive {drive / 60:.1f} min, {len(sim.frames)} frames ({len(sim.frames) / drive:.0f}/s), "
               f"{os.path.getsize(log_path) / 1e6:.1f} MB candump (simulated in {time.perf_counter() - started:.0f} s)")
