@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from canest.config import Config
+from canest.config import FILTER_MODELS, MODEL_FILTERS, Config
 from canest.evaluate import DISPLAY, score
 from canest.filters import FILTERS
 from canest.replay import replay
@@ -30,8 +30,15 @@ class FilterRun:
 
 
 def with_filter(config: Config, name: str) -> Config:
-    """The config with another filter, its own default factorization and no filter-specific options."""
-    est = dataclasses.replace(config.estimator, filter=name, factorization=None, filter_options={})
+    """The config with another filter, its own default factorization and no filter-specific options.
+
+    The model follows the filter where the filter needs one (``dckf``, ``dici-gfckf``); otherwise
+    the configured model stays (so ``ckf`` and ``gfckf`` run on the tire-force model for the
+    DICI-GFCKF comparison) unless it needs a specific filter, then the single-track model is used.
+    """
+    model = config.estimator.model
+    model = FILTER_MODELS.get(name, "single_track" if model in MODEL_FILTERS else model)
+    est = dataclasses.replace(config.estimator, filter=name, model=model, factorization=None, filter_options={})
     return dataclasses.replace(config, estimator=est)
 
 

@@ -13,6 +13,7 @@ from pathlib import Path
 import yaml
 
 from canest import signals as sig
+from canest.models.tire import TireModelParams
 
 BUILTIN_DIR = Path(__file__).resolve().parent / "data"
 DEFAULT_CONFIG = BUILTIN_DIR / "dici_ev.yaml"
@@ -39,6 +40,7 @@ class VehicleParams:
     steering_ratio: float
     cornering_stiffness_front: float
     cornering_stiffness_rear: float
+    tire: TireModelParams = TireModelParams()
 
     @property
     def wheelbase(self) -> float:
@@ -78,19 +80,34 @@ class MessageChecks:
     valid: str | None = None
 
 
+# Models and the filters they need: the dual filter estimates the two-track model's friction
+# parameters and nothing else does; the DICI-GFCKF fuses the tire-force model's two IMUs.
+MODEL_FILTERS = {"two_track": ("dckf",)}
+FILTER_MODELS = {"dckf": "two_track", "dici-gfckf": "tire_force"}
+MODEL_INPUTS = {"tire_force": sig.INPUT_GROUPS["motor_torques"], "two_track": sig.INPUT_GROUPS["motor_torques"]}
+FILTER_INPUTS = {"dici-gfckf": sig.INPUT_GROUPS["imu_2"]}
+
+
 @dataclass(frozen=True)
 class EstimatorConfig:
     filter: str = "ckf"
+    model: str = "single_track"  # single_track, tire_force (7 states) or two_track (7-DOF + friction)
     factorization: str | None = None  # None: the filter's own default (svd for svd-fckf, else cholesky)
     filter_options: dict = field(default_factory=dict)
     rate_hz: float = 100.0
     min_speed: float = 3.0
     speed_hysteresis: float = 1.0
     timeout_cycles: float = 5.0
+    friction_excitation: float = 1000.0  # N per unit mu: |dF/dmu| above which a wheel's friction is observable
+    friction_correlation: float = 0.9  # prior correlation of the four wheels' frictions (same road)
     latency_compensation: bool = False
-    process_noise: dict = field(default_factory=lambda: {"yaw_rate": 0.05, "beta": 0.01, "vx": 0.3})
-    measurement_noise: dict = field(default_factory=lambda: {"ay": 0.15, "yaw_rate": 0.005, "vx_wheel": 0.15})
-    initial_std: dict = field(default_factory=lambda: {"yaw_rate": 0.05, "beta": 0.05, "vx": 2.0})
+    process_noise: dict = field(default_factory=lambda: {
+        "yaw_rate": 0.05, "beta": 0.01, "vx": 0.3, "lateral_force": 3000.0, "wheel_speed": 5.0, "friction": 0.1})
+    measurement_noise: dict = field(default_factory=lambda: {
+        "ay": 0.15, "yaw_rate": 0.005, "vx_wheel": 0.15, "ax": 0.15, "ax_2": 0.3, "ay_2": 0.3, "yaw_rate_2": 0.01,
+        "wheel_speed": 0.1})
+    initial_std: dict = field(default_factory=lambda: {
+        "yaw_rate": 0.05, "beta": 0.05, "vx": 2.0, "lateral_force": 1000.0, "wheel_speed": 1.0, "friction": 0.3})
 
 
 @dataclass(frozen=True)
@@ -172,20 +189,28 @@ class _Document:
             raise self.error(key_path + (unknown[0],), f"unknown key; known keys: {', '.join(sorted(known))}")
 
 
-VEHICLE_FIELDS = [f.name for f in dataclasses.fields(VehicleParams) if f.name != "name"]
-ESTIMATOR_NUMBERS = ("rate_hz", "min_speed", "speed_hysteresis", "timeout_cycles")
-NOISE_KEYS = {
-    "process_noise": ("yaw_rate", "beta", "vx"),
-    "measurement_noise": ("ay", "yaw_rate", "vx_wheel"),
-    "initial_std": ("yaw_rate", "beta", "vx"),
-}
+VEHICLE_FIELDS = [f.name for f in dataclasses.fields(VehicleParams) if f.name not in ("name", "tire")]
+TIRE_FIELDS = [f.name for f in dataclasses.fields(TireModelParams)]
+ESTIMATOR_NUMBERS = ("rate_hz", "min_speed", "speed_hysteresis", "timeout_cycles", "friction_excitation",
+                     "friction_correlation")
+NOISE_KEYS = {name: tuple(getattr(EstimatorConfig(), name)) for name in ("process_noise", "measurement_noise", "initial_std")}
+MODELS = ("single_track", "tire_force", "two_track")
+
+
+def _tire(doc: _Document) -> TireModelParams:
+    key_path = ("vehicle", "tire")
+    section = doc.section(key_path, required=False)
+    doc.reject_unknown(key_path, section, TIRE_FIELDS)
+    defaults = TireModelParams()
+    return TireModelParams(**{name: doc.number(key_path, section, name, getattr(defaults, name),
+                                               positive=not name.endswith("curvature")) for name in TIRE_FIELDS})
 
 
 def _vehicle(doc: _Document) -> VehicleParams:
     section = doc.section(("vehicle",))
-    doc.reject_unknown(("vehicle",), section, VEHICLE_FIELDS + ["name"])
+    doc.reject_unknown(("vehicle",), section, VEHICLE_FIELDS + ["name", "tire"])
     values = {name: doc.number(("vehicle",), section, name) for name in VEHICLE_FIELDS}
-    return VehicleParams(name=str(section.get("name", doc.path.stem)), **values)
+    return VehicleParams(name=str(section.get("name", doc.path.stem)), tire=_tire(doc), **values)
 
 
 def _bus(doc: _Document, key_path: tuple, default_channel: str) -> BusConfig:
@@ -231,26 +256,38 @@ def _estimator(doc: _Document) -> EstimatorConfig:
     name = str(section.get("filter", defaults.filter))
     if name not in FILTERS:
         raise doc.error(key_path + ("filter",), f"unknown filter '{name}'; available: {', '.join(sorted(FILTERS))}")
+    if values["friction_correlation"] >= 1.0:
+        raise doc.error(key_path + ("friction_correlation",), f"must be below 1, got {values['friction_correlation']}")
+    model = str(section.get("model", FILTER_MODELS.get(name, defaults.model)))
+    if model not in MODELS:
+        raise doc.error(key_path + ("model",), f"unknown model '{model}'; available: {', '.join(MODELS)}")
+    if FILTER_MODELS.get(name, model) != model or name not in MODEL_FILTERS.get(model, (name,)):
+        needed = FILTER_MODELS.get(name) or MODEL_FILTERS[model][0]
+        raise doc.error(key_path + ("model",), f"filter '{name}' and model '{model}' do not fit: "
+                                                f"use {'model' if name in FILTER_MODELS else 'filter'} '{needed}'")
     factorization = section.get("factorization", defaults.factorization)
     if factorization is not None and factorization not in FACTORIZATIONS:
         raise doc.error(key_path + ("factorization",), f"must be one of {', '.join(FACTORIZATIONS)}")
     options = section.get("filter_options", {})
     if not isinstance(options, dict):
         raise doc.error(key_path + ("filter_options",), "must be a mapping of option: value")
-    config = EstimatorConfig(filter=name, factorization=factorization, filter_options=options,
+    config = EstimatorConfig(filter=name, model=model, factorization=factorization, filter_options=options,
                              latency_compensation=compensation, **values)
     _check_filter_options(doc, config)
     return config
 
 
 def _check_filter_options(doc: _Document, est: EstimatorConfig) -> None:
-    """Build the filter once on a dummy state so a wrong option fails at load time, naming the key."""
+    """Build the filter once on a dummy state of the model's size so a wrong option fails at load time, naming the key."""
     import numpy as np
 
     from canest.estimator import make_filter
+    from canest.models.registry import MODELS as MODEL_CLASSES
 
+    model = MODEL_CLASSES[est.model]
+    n = len(model.state_names)
     try:
-        make_filter(est, np.zeros(3), np.eye(3))
+        make_filter(est, np.zeros(n), np.eye(n), **getattr(model, "filter_options", {}))
     except (TypeError, ValueError) as exc:
         raise doc.error(("estimator", "filter_options"), f"{est.filter}: {exc}") from None
 
@@ -300,6 +337,15 @@ def _signal_specs(doc: _Document, database, dbc_path: Path, vehicle: VehiclePara
     return specs
 
 
+def _check_model_inputs(doc: _Document, est: EstimatorConfig, specs: dict) -> None:
+    """The tire-force and two-track models need the motor torques; the DICI-GFCKF needs the second IMU."""
+    for reason, needed in ((f"model '{est.model}'", MODEL_INPUTS.get(est.model, ())),
+                           (f"filter '{est.filter}'", FILTER_INPUTS.get(est.filter, ()))):
+        missing = [name for name in needed if name not in specs]
+        if missing:
+            raise doc.error(("input", "signals"), f"{reason} needs {', '.join(missing)}")
+
+
 def _message_checks(doc: _Document, database, dbc_path: Path, specs: dict) -> dict:
     key_path = ("input", "messages")
     section = doc.section(key_path, required=False)
@@ -341,6 +387,8 @@ def load_config(path) -> Config:
     input_db = load_database(input_dbc, f"{path}: input.dbc")
     load_database(output_dbc, f"{path}: output.dbc")
     specs = _signal_specs(doc, input_db, input_dbc, vehicle)
+    estimator = _estimator(doc)
+    _check_model_inputs(doc, estimator, specs)
     return Config(
         path=path.resolve(),
         vehicle=vehicle,
@@ -350,5 +398,5 @@ def load_config(path) -> Config:
         output_bus=_bus(doc, ("output", "bus"), "vcan1"),
         signals=specs,
         messages=_message_checks(doc, input_db, input_dbc, specs),
-        estimator=_estimator(doc),
+        estimator=estimator,
     )

@@ -39,7 +39,7 @@ from canest.signals import INPUT_GROUPS, WHEELS
 log = logging.getLogger("canest.estimator")
 
 OUTPUT_STATES = ("vx", "vy", "beta", "yaw_rate")
-VALID_BITS = ("vx", "vy", "beta", "yaw_rate", "forces", "friction")
+VALID_BITS = ("vx", "vy", "beta", "yaw_rate", "forces", "friction", "friction_observable")
 MODES = ("initializing", "normal", "low_speed", "degraded", "no_input")
 WHEEL_SPEEDS = tuple(f"wheel_speed_{w}" for w in WHEELS)
 DIVERGENCE_WINDOW = 50  # updates
@@ -85,26 +85,41 @@ class _Inputs:
         return any(self.fresh.get(name, False) for name in names)
 
 
-def make_filter(est, x0, P0):
-    """The configured filter; ``factorization`` only when the config sets it (else the filter's default)."""
-    options = dict(est.filter_options)
+def make_filter(est, x0, P0, **model_options):
+    """The configured filter; ``factorization`` only when the config sets it (else the filter's default).
+
+    ``model_options`` are what the model tells the filter (the dual filter's parameter count)."""
+    options = {**model_options, **est.filter_options}
     if est.factorization is not None:
         options["factorization"] = est.factorization
     return FILTERS[est.filter](x0, P0, **options)
 
 
+PER_WHEEL_KEYS = {"fy_": "lateral_force", "w_": "wheel_speed", "wheel_speed_": "wheel_speed", "mu_": "friction"}
+
+
+def noise_key(name: str) -> str:
+    """The noise config key of a model state or measurement: the four wheels of a quantity share one key."""
+    return next((key for prefix, key in PER_WHEEL_KEYS.items() if name.startswith(prefix)), name)
+
+
 class Estimator:
-    def __init__(self, config: Config, resampler):
+    """The 3-DOF single-track estimator; subclasses bind other models through the hooks
+    ``_initial_state``, ``_control``, ``_update`` and ``_extra_values``."""
+
+    extra_states: tuple = ()  # published beyond OUTPUT_STATES, each with its _std
+
+    def __init__(self, config: Config, resampler, model=None):
         self.config = config
         self.vehicle = config.vehicle
         self.est = config.estimator
-        self.model = SingleTrackModel(config.vehicle)
+        self.model = model or SingleTrackModel(config.vehicle)
         self.resampler = resampler
         self.dt = 1.0 / self.est.rate_hz
-        names = ("yaw_rate", "beta", "vx")
+        names = [noise_key(n) for n in self.model.state_names]
         self.Q = np.diag(np.array([self.est.process_noise[n] for n in names]) ** 2 * self.dt)  # per tick
         self.p0 = np.diag(np.array([self.est.initial_std[n] for n in names]) ** 2)
-        self.r_std = np.array([self.est.measurement_noise[n] for n in ("ay", "yaw_rate", "vx_wheel")])
+        self.r_std = np.array([self.est.measurement_noise[noise_key(n)] for n in self.model.measurement_names])
         self.filter = None
         self.low_speed = False
         self.resets = 0
@@ -112,9 +127,11 @@ class Estimator:
         self.last_mode = "initializing"
         self.recent_nis = deque(maxlen=DIVERGENCE_WINDOW)
         self.suspect_until = -math.inf
+        model = self.model
         self.transitions = {
-            False: Transition(self.model.transition, self.model.transition_jacobian),
-            True: Transition(self.model.transition_low_speed, self.model.transition_low_speed_jacobian),
+            False: Transition(model.transition, getattr(model, "transition_jacobian", None)),
+            True: Transition(getattr(model, "transition_low_speed", model.transition),
+                             getattr(model, "transition_low_speed_jacobian", None)),
         }
 
     def reset(self) -> None:
@@ -144,15 +161,25 @@ class Estimator:
     def _wheel_speed(self, inputs: _Inputs) -> float:
         return self.vehicle.wheel_radius * sum(inputs.values[w] for w in WHEEL_SPEEDS) / len(WHEEL_SPEEDS)
 
+    def _initial_state(self, inputs: _Inputs) -> np.ndarray:
+        """Yaw rate from the gyro, vx from the wheels, every other state 0."""
+        x0 = np.zeros(len(self.model.state_names))
+        x0[YAW] = inputs.values["yaw_rate"]
+        x0[VX] = self._wheel_speed(inputs)
+        return x0
+
     def _start(self, inputs: _Inputs) -> bool:
         if not inputs.has("yaw_rate", *WHEEL_SPEEDS):
             return False
-        x0 = np.zeros(3)
-        x0[YAW] = inputs.values["yaw_rate"]
-        x0[VX] = self._wheel_speed(inputs)
-        self.filter = make_filter(self.est, x0, self.p0)
+        x0 = self._initial_state(inputs)
+        self.filter = make_filter(self.est, x0, self.p0, **getattr(self.model, "filter_options", {}))
         self.low_speed = x0[VX] < self.est.min_speed
         return True
+
+    def _control(self, inputs: _Inputs, t: float) -> np.ndarray:
+        """u = (road wheel angle, ax, cornering stiffness scale 1)."""
+        steering = inputs.values.get("steering_wheel_angle", 0.0)
+        return np.array([steering / self.vehicle.steering_ratio, inputs.values["ax"] if inputs.has("ax") else 0.0, 1.0])
 
     def _choose_mode(self) -> None:
         vx = self.filter.x[VX]
@@ -214,8 +241,7 @@ class Estimator:
         if self.filter is None and not self._start(inputs):
             return self._publish(t, "initializing", missing, inputs)
         self._choose_mode()
-        steering = inputs.values.get("steering_wheel_angle", 0.0)
-        u = np.array([steering / self.vehicle.steering_ratio, inputs.values["ax"] if inputs.has("ax") else 0.0, 1.0])
+        u = self._control(inputs, t)
         started = time.perf_counter()
         self.filter.predict(self.transitions[self.low_speed], u, self.dt, self.Q)
         lateral_ok = not self.low_speed and inputs.has("steering_wheel_angle", "ay")
@@ -236,11 +262,15 @@ class Estimator:
             mode = "normal"
         return self._publish(t, mode, missing, inputs, lateral_ok)
 
+    def _extra_values(self, values: dict, valid: dict, std: np.ndarray, inputs: _Inputs, lateral_ok: bool) -> None:
+        """Add model-specific values, ``_std`` and validity (none for the single-track model)."""
+
     def _publish(self, t, mode, missing, inputs: _Inputs, lateral_ok: bool = False) -> Estimate:
         self.last_mode = mode
         if self.filter is None:
-            values = {name: math.nan for name in OUTPUT_STATES}
-            values.update({f"{name}_std": math.nan for name in OUTPUT_STATES})
+            names = OUTPUT_STATES + self.extra_states
+            values = {name: math.nan for name in names}
+            values.update({f"{name}_std": math.nan for name in names})
             return Estimate(t, values, {}, mode, self.est.filter, missing=missing, resets=self.resets)
         x, P = self.filter.x, self.filter.P
         std = np.sqrt(np.maximum(np.diag(P), 0.0))
@@ -250,7 +280,7 @@ class Estimator:
         jac[VX] = math.tan(beta)
         values = {
             "vx": vx, "vy": vx * math.tan(beta), "beta": beta, "yaw_rate": x[YAW],
-            "vx_std": std[VX], "vy_std": math.sqrt(max(jac @ P @ jac, 0.0)), "beta_std": std[BETA],
+            "vx_std": std[VX], "vy_std": math.sqrt(max(jac @ P[:3, :3] @ jac, 0.0)), "beta_std": std[BETA],
             "yaw_rate_std": std[YAW],
         }
         wheels = inputs.has(*WHEEL_SPEEDS)
@@ -260,4 +290,5 @@ class Estimator:
             "beta": lateral_ok and wheels,
             "vy": lateral_ok and wheels,
         }
+        self._extra_values(values, valid, std, inputs, lateral_ok)
         return Estimate(t, values, valid, mode, self.est.filter, self.filter.nis, missing, self.resets)

@@ -39,7 +39,8 @@ OUTPUT_MESSAGES = {
     "CE_YawSideslip": _state_signals([("YawRate", "yaw_rate"), ("Sideslip", "beta")]),
     "CE_LateralForcesFront": _state_signals([(f"Fy{_WHEEL_SIGNAL[w]}", f"fy_{w}") for w in ("fl", "fr")]),
     "CE_LateralForcesRear": _state_signals([(f"Fy{_WHEEL_SIGNAL[w]}", f"fy_{w}") for w in ("rl", "rr")]),
-    "CE_Friction": _state_signals([(f"Mu{_WHEEL_SIGNAL[w]}", f"mu_{w}") for w in WHEELS]),
+    "CE_Friction": {**_state_signals([(f"Mu{_WHEEL_SIGNAL[w]}", f"mu_{w}") for w in WHEELS]),
+                    **{f"Mu{_WHEEL_SIGNAL[w]}Observable": ("flag", f"mu_{w}_observable") for w in WHEELS}},
 }
 STATUS_MESSAGE = "CE_Status"
 
@@ -95,6 +96,8 @@ class EstimateEncoder:
                 if kind == "value":
                     value = estimate.values[key]
                     values[signal_name] = clamp_to_signal(sender.signals[signal_name], value) if math.isfinite(value) else 0.0
+                elif kind == "flag":
+                    values[signal_name] = int(bool(estimate.valid.get(key, False)))
                 else:
                     finite = math.isfinite(estimate.values[key])
                     values[signal_name] = int(bool(estimate.valid.get(key, False)) and finite)
@@ -114,7 +117,7 @@ class EstimateEncoder:
 class EstimateCsvWriter:
     """One row per tick: ``t``, the states, their ``_std`` columns, ``valid`` (bit mask) and ``mode``.
 
-    ``valid`` bits: 0 vx, 1 vy, 2 beta, 3 yaw rate, 4 lateral forces, 5 friction.
+    ``valid`` bits: 0 vx, 1 vy, 2 beta, 3 yaw rate, 4 lateral forces, 5 friction, 6 friction observable now.
     """
 
     def __init__(self, path):

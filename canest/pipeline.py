@@ -14,7 +14,7 @@ import can
 
 from canest.codec import InputDecoder
 from canest.config import Config
-from canest.estimator import Estimator
+from canest.estimator_forces import make_estimator
 from canest.outputs import EstimateEncoder
 from canest.resample import Resampler, TickClock
 
@@ -37,7 +37,7 @@ class Pipeline:
         self.config = config
         self.decoder = InputDecoder(config)
         self.resampler = Resampler(config.signals, input_timeouts(config, self.decoder))
-        self.estimator = Estimator(config, self.resampler)
+        self.estimator = make_estimator(config, self.resampler)
         self.encoder = EstimateEncoder(config.output_dbc, output_channel)
         self.clock = TickClock(1.0 / config.estimator.rate_hz)
         self.counts = Counter()

@@ -116,3 +116,39 @@ def test_wrong_filter_option_names_the_key(tmp_path):
     assert re.search(r":\d+: estimator\.filter_options: lmrwekf: .*windw", error_of(path))
     path = write_variant(tmp_path, lambda d: d["estimator"].update(filter="lmrwekf", filter_options={"forgetting": 0.5}))
     assert "forgetting must be in [0.95, 0.995]" in error_of(path)
+
+
+def test_models_and_filters_must_fit(tmp_path):
+    path = write_variant(tmp_path, lambda d: d["estimator"].update(filter="dckf", model="single_track"))
+    assert re.search(r":\d+: estimator\.model: filter 'dckf' and model 'single_track' do not fit: use model 'two_track'",
+                     error_of(path))
+    path = write_variant(tmp_path, lambda d: d["estimator"].update(filter="ckf", model="two_track"))
+    assert "use filter 'dckf'" in error_of(path)
+    path = write_variant(tmp_path, lambda d: d["estimator"].update(filter="gfckf", model="tire_force"))
+    assert load_config(path).estimator.model == "tire_force"  # the paper's comparison: any sigma-point filter
+    path = write_variant(tmp_path, lambda d: d["estimator"].update(filter="dici-gfckf"))
+    assert load_config(path).estimator.model == "tire_force"  # implied by the filter
+
+
+def test_dici_needs_the_second_imu_and_force_models_the_torques(tmp_path):
+    def drop(names, **estimator):
+        def edit(d):
+            d["estimator"].update(**estimator)
+            for name in names:
+                del d["input"]["signals"][name]
+        return edit
+
+    path = write_variant(tmp_path, drop(["ay_2"], filter="dici-gfckf"))
+    assert "input.signals: filter 'dici-gfckf' needs ay_2" in error_of(path)
+    path = write_variant(tmp_path, drop(["motor_torque_rr"], filter="dckf"))
+    assert "model 'two_track' needs motor_torque_rr" in error_of(path)
+
+
+def test_tire_section_is_validated(tmp_path):
+    path = write_variant(tmp_path, lambda d: d["vehicle"].update(tire={"relaxation_length": 0.4, "lateral_curvature": -0.5}))
+    tire = load_config(path).vehicle.tire
+    assert tire.relaxation_length == 0.4 and tire.lateral_curvature == -0.5
+    path = write_variant(tmp_path, lambda d: d["vehicle"].update(tire={"relaxaton_length": 0.4}))
+    assert re.search(r":\d+: vehicle\.tire\.relaxaton_length: unknown key", error_of(path))
+    path = write_variant(tmp_path, lambda d: d["estimator"].update(friction_correlation=1.0))
+    assert "friction_correlation: must be below 1" in error_of(path)

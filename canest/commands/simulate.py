@@ -18,7 +18,7 @@ The log is encoded through the config's input DBC and signal map, each message
 at its DBC cycle time; its format follows the suffix (.log candump, .asc,
 .blf, .trc, .csv). The truth CSV has the estimate CSV's columns (t, vx, vy,
 beta, yaw_rate; SI units, rad) plus ax, ay, delta, and per wheel fx_, fy_,
-fz_, mu_, alpha_, kappa_ (fl, fr, rl, rr)."""
+fz_, mu_, alpha_, kappa_, w_ (wheel speed, rad/s), torque_ (fl, fr, rl, rr)."""
 
 
 def register(subparsers) -> None:

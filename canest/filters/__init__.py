@@ -7,6 +7,8 @@ one line here.
 """
 from canest.filters.adaptive import AdaptiveSvdFifthDegreeCKF, LimitedMemoryRandomWeightedEKF
 from canest.filters.base import Measurement, Transition
+from canest.filters.dici import DICIGeneralizedFifthDegreeCKF
+from canest.filters.dual import DoubleCubatureKalmanFilter
 from canest.filters.ekf import DualExtendedKalmanFilter, ExtendedKalmanFilter
 from canest.filters.robust import MaximumCorrentropySCKF
 from canest.filters.sigma import (
@@ -29,6 +31,8 @@ FILTERS = {cls.name: cls for cls in (
     FifthDegreeCubatureKalmanFilter,
     AdaptiveSvdFifthDegreeCKF,
     GeneralizedFifthDegreeCKF,
+    DICIGeneralizedFifthDegreeCKF,
+    DoubleCubatureKalmanFilter,
 )}
 
 __all__ = ["FILTERS", "FACTORIZATIONS", "Measurement", "Transition"]

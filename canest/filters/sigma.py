@@ -68,9 +68,16 @@ class SigmaPointFilter(GaussianFilter):
         z_hat, Pzz, Pxz = self.predicted_measurement(measurement, u)
         self.correct(z - z_hat, Pzz, Pxz, R)
 
-    def correct(self, y, Pzz, Pxz, R) -> None:
+    def correct(self, y, Pzz, Pxz, R, gain_mask=None) -> None:
+        """Kalman gain and Joseph update; states outside ``gain_mask`` keep their value (their gain rows are 0).
+
+        The Joseph form stays the true posterior covariance for any gain, so a
+        masked (suboptimal) gain leaves P consistent.
+        """
         S = symmetrize(Pzz + R)
         K = np.linalg.solve(S, Pxz.T).T
+        if gain_mask is not None:
+            K[~gain_mask] = 0.0
         H = np.linalg.solve(self.P, Pxz).T
         self.apply_gain(y, S, K, H, R)
 

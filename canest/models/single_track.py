@@ -42,6 +42,7 @@ from __future__ import annotations
 import numpy as np
 
 from canest.config import VehicleParams
+from canest.models.integrate import rk4
 
 STATE_NAMES = ("yaw_rate", "beta", "vx")
 MEASUREMENT_NAMES = ("ay", "yaw_rate", "vx_wheel")
@@ -104,11 +105,7 @@ class SingleTrackModel:
 
     def transition(self, X: np.ndarray, u: np.ndarray, dt: float) -> np.ndarray:
         """One RK4 step of length ``dt`` with ``u`` held; X of shape (N, 3)."""
-        k1 = self.derivatives(X, u)
-        k2 = self.derivatives(X + 0.5 * dt * k1, u)
-        k3 = self.derivatives(X + 0.5 * dt * k2, u)
-        k4 = self.derivatives(X + dt * k3, u)
-        return X + (dt / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+        return rk4(self.derivatives, X, u, dt)
 
     def transition_low_speed(self, X: np.ndarray, u: np.ndarray, dt: float) -> np.ndarray:
         """Kinematic model for low speed, standstill and reversing.

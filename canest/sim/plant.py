@@ -24,9 +24,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from canest.config import VehicleParams
+from canest.models.wheels import FRONT, GRAVITY, WheelGeometry  # noqa: F401 (GRAVITY re-exported)
 from canest.sim.tire import TireParams, combined_forces
 
-GRAVITY = 9.81
 AIR_DENSITY = 1.2
 DRAG_AREA = 0.7  # Cd * A, m^2
 LOAD_TRANSFER_TAU = 0.08  # s
@@ -37,7 +37,6 @@ W = slice(6, 10)
 FY = slice(10, 14)
 AXL, AYL = 14, 15
 STATE_SIZE = 16
-FRONT = np.array([True, True, False, False])
 
 
 @dataclass
@@ -58,15 +57,9 @@ class TwoTrackPlant:
         self.p = vehicle
         self.tire = tire
         self.mu = np.broadcast_to(np.asarray(mu, dtype=float), (4,)).copy()
-        a, b, L = vehicle.cg_to_front, vehicle.cg_to_rear, vehicle.wheelbase
-        tf, tr = vehicle.track_front, vehicle.track_rear
-        self.pos_x = np.array([a, a, -b, -b])
-        self.pos_y = np.array([tf / 2, -tf / 2, tr / 2, -tr / 2])
-        m = vehicle.mass
-        self.fz_static = m * GRAVITY * np.array([b, b, a, a]) / (2 * L)
-        sign_lr = np.array([-1.0, 1.0, -1.0, 1.0])  # left wheels unload in a left turn
-        self.fz_ax = m * vehicle.cg_height / (2 * L) * np.array([-1.0, -1.0, 1.0, 1.0])
-        self.fz_ay = m * vehicle.cg_height / L * sign_lr * np.array([b / tf, b / tf, a / tr, a / tr])
+        self.wheels = WheelGeometry(vehicle)
+        self.pos_x, self.pos_y = self.wheels.pos_x, self.wheels.pos_y
+        self.fz_static = self.wheels.static_load
 
     def initial_state(self, speed: float) -> np.ndarray:
         s = np.zeros(STATE_SIZE)
@@ -75,16 +68,13 @@ class TwoTrackPlant:
         return s
 
     def _forces(self, s: np.ndarray, delta: float):
-        steer = np.where(FRONT, delta, 0.0)
-        vx_w = s[VX] - s[R] * self.pos_y
-        vy_w = s[VY] + s[R] * self.pos_x
+        steer = self.wheels.steer(delta)
         cos_d, sin_d = np.cos(steer), np.sin(steer)
-        v_long = vx_w * cos_d + vy_w * sin_d
-        v_lat = -vx_w * sin_d + vy_w * cos_d
+        v_long, v_lat = (v[0] for v in self.wheels.wheel_velocities(s[R:R + 1], s[VX:VX + 1], s[VY:VY + 1], delta))
         speed = np.maximum(np.abs(v_long), MIN_SLIP_SPEED)
         alpha = -np.arctan2(v_lat, speed)
         kappa = (s[W] * self.p.wheel_radius - v_long) / speed
-        fz = np.maximum(self.fz_static + self.fz_ax * s[AXL] + self.fz_ay * s[AYL], 0.0)
+        fz = self.wheels.loads(s[AXL], s[AYL])
         fx, fy_ss = combined_forces(alpha, kappa, fz, self.mu, self.fz_static, FRONT, self.tire)
         return steer, cos_d, sin_d, speed, alpha, kappa, fz, fx, fy_ss
 

@@ -29,7 +29,7 @@ TRUTH_DT = 0.01
 DEFAULT_CYCLE = 0.01
 
 TRUTH_COLUMNS = ("t", "vx", "vy", "beta", "yaw_rate", "ax", "ay", "delta", "steering_wheel_angle",
-                 *(f"{q}_{w}" for q in ("fx", "fy", "fz", "mu", "alpha", "kappa") for w in WHEELS))
+                 *(f"{q}_{w}" for q in ("fx", "fy", "fz", "mu", "alpha", "kappa", "w", "torque") for w in WHEELS))
 
 
 @dataclass
@@ -89,7 +89,7 @@ def simulate(config: Config, maneuver: str, speed_kmh: float, mu, *, duration=No
         delta = swa / config.vehicle.steering_ratio
         _, outputs = plant.derivatives(state, delta, torque)
         if k % truth_every == 0:
-            rows.append(_truth_row(t + start_time, state, outputs, delta, swa, plant.mu))
+            rows.append(_truth_row(t + start_time, state, outputs, delta, swa, plant.mu, torque))
         if schedule[0][0] <= t:
             true_values = _true_inputs(state, outputs, swa, torque)
             while schedule[0][0] <= t:
@@ -106,6 +106,6 @@ def simulate(config: Config, maneuver: str, speed_kmh: float, mu, *, duration=No
     return Simulation(frames, truth)
 
 
-def _truth_row(t, state, outputs, delta, swa, mu) -> tuple:
+def _truth_row(t, state, outputs, delta, swa, mu, torque) -> tuple:
     return (t, state[VX], state[VY], math.atan2(state[VY], state[VX]), state[R], outputs.ax, outputs.ay, delta, swa,
-            *outputs.fx, *outputs.fy, *outputs.fz, *mu, *outputs.alpha, *outputs.kappa)
+            *outputs.fx, *outputs.fy, *outputs.fz, *mu, *outputs.alpha, *outputs.kappa, *state[W], *torque)

@@ -13,7 +13,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-_LOAD_SHAPE = np.sin(2.0 * np.arctan(1.0 / 1.5))
+from canest.models.tire import cornering_stiffness, magic_formula
+
+LOAD_SENSITIVITY = 1.5
 
 
 @dataclass(frozen=True)
@@ -33,15 +35,7 @@ class TireParams:
 
 def slip_stiffness(coefficient: np.ndarray, fz: np.ndarray, fz_nominal: np.ndarray) -> np.ndarray:
     """Load-sensitive slip stiffness, equal to ``coefficient * fz_nominal`` at nominal load."""
-    load = np.maximum(fz, 0.0)
-    return coefficient * fz_nominal * np.sin(2.0 * np.arctan(load / (1.5 * fz_nominal))) / _LOAD_SHAPE
-
-
-def magic_formula(slip: np.ndarray, stiffness: np.ndarray, shape: float, curvature: float, peak: np.ndarray) -> np.ndarray:
-    """Pacejka's Magic Formula with B = stiffness / (C D)."""
-    peak = np.maximum(peak, 1e-6)
-    bs = stiffness / (shape * peak) * slip
-    return peak * np.sin(shape * np.arctan(bs - curvature * (bs - np.arctan(bs))))
+    return cornering_stiffness(coefficient * fz_nominal, fz, fz_nominal, LOAD_SENSITIVITY)
 
 
 def combined_forces(alpha, kappa, fz, mu, fz_nominal, front_mask, tire: TireParams):

@@ -1,0 +1,85 @@
+"""``dckf``: the double cubature Kalman filter of the DCKF paper (section 3, steps 1-4).
+
+Two third-degree cubature filters with SVD square roots (eqs 16-19, 23-26):
+one for the vehicle states ``x_s`` and one for the parameters ``x_p`` (the
+four friction coefficients), the last ``parameters`` entries of the joint
+state. The transition and measurement models are the joint ones; each filter
+sees them with the other filter's latest estimate held fixed:
+
+1. time update of ``x_p`` (eqs 16-22; a random walk: ``x_p`` unchanged, ``P_p += Q_p``);
+2. time update of ``x_s`` with ``x_p`` at its prediction (eqs 23-29);
+3. measurement update of ``x_p`` with ``x_s`` at its prediction (eqs 30-37);
+4. measurement update of ``x_s`` with ``x_p`` at its new estimate (eqs 38-45).
+
+The joint covariance is block diagonal: the two filters ignore their
+cross-covariance (the dual filter's approximation). Eqs 36 and 44 print
+``Z_k Z^_k/k-1`` where the innovation ``Z_k - Z^_k/k-1`` is meant; eqs 22, 29, 33,
+34 use the raw second moment minus the mean's outer product, computed here in
+the centered form (the same value without cancellation).
+
+Parameters the estimator marks in ``frozen`` (not observable this tick) get
+a zero gain in step 3: they keep their value, and the Joseph update keeps
+their covariance honest. Their variance grows with ``Q_p`` but never beyond
+its initial value (``P0``): each time update rescales a row and column whose
+variance exceeds it (a congruence ``D P D`` with positive diagonal D keeps P
+positive definite).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from canest.filters.base import GaussianFilter, Measurement, Transition
+from canest.filters.sigma import CubatureKalmanFilter
+
+IDENTITY = Transition(lambda X, u, dt: X)
+
+
+class DoubleCubatureKalmanFilter(GaussianFilter):
+    name = "dckf"
+
+    def __init__(self, x0, P0, factorization: str = "svd", parameters: int = 4):
+        super().__init__(x0, P0)
+        n = self.x.size
+        if not 0 < parameters < n:
+            raise ValueError(f"parameters must be between 1 and {n - 1} (the state has {n} entries), got {parameters}")
+        self.split = n - parameters
+        s, p = slice(0, self.split), slice(self.split, n)
+        self.blocks = (s, p)
+        self.states = CubatureKalmanFilter(self.x[s], self.P[s, s], factorization)
+        self.params = CubatureKalmanFilter(self.x[p], self.P[p, p], factorization)
+        self.variance_cap = np.diag(self.P)[p].copy()
+        self.frozen = np.zeros(parameters, dtype=bool)
+
+    def _join(self) -> None:
+        s, p = self.blocks
+        self.x = np.concatenate([self.states.x, self.params.x])
+        self.P = np.zeros((self.x.size, self.x.size))
+        self.P[s, s], self.P[p, p] = self.states.P, self.params.P
+        self.repairs = self.states.repairs + self.params.repairs
+
+    def _with_params(self, Xs):
+        return np.hstack([Xs, np.broadcast_to(self.params.x, (Xs.shape[0], self.params.x.size))])
+
+    def _with_states(self, Xp):
+        return np.hstack([np.broadcast_to(self.states.x, (Xp.shape[0], self.split)), Xp])
+
+    def _cap_variance(self) -> None:
+        scale = np.sqrt(np.minimum(1.0, self.variance_cap / np.maximum(np.diag(self.params.P), 1e-300)))
+        self.params.P = self.params.P * np.outer(scale, scale)
+
+    def predict(self, transition: Transition, u, dt: float, Q: np.ndarray) -> None:
+        s, p = self.blocks
+        self.params.predict(IDENTITY, u, dt, Q[p, p])  # step 1
+        self._cap_variance()
+        state_transition = Transition(lambda Xs, u_, dt_: transition.f(self._with_params(Xs), u_, dt_)[:, s])
+        self.states.predict(state_transition, u, dt, Q[s, s])  # step 2
+        self._join()
+
+    def update(self, z, measurement: Measurement, u, R) -> None:
+        params_view = Measurement(lambda Xp, u_: measurement.h(self._with_states(Xp), u_))
+        z_hat, Pzz, Pxz = self.params.predicted_measurement(params_view, u)  # step 3
+        self.params.correct(z - z_hat, Pzz, Pxz, R, gain_mask=~self.frozen)
+        states_view = Measurement(lambda Xs, u_: measurement.h(self._with_params(Xs), u_))
+        self.states.update(z, states_view, u, R)  # step 4
+        self.y, self.S, self.K, self.nis = self.states.y, self.states.S, self.states.K, self.states.nis
+        self._join()

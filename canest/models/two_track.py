@@ -1,0 +1,106 @@
+"""Seven-degree-of-freedom two-track model with per-wheel friction (DCKF paper eqs 1-11).
+
+Joint state ``x = (r, beta, vx, w_fl, w_fr, w_rl, w_rr, mu_fl, mu_fr, mu_rl, mu_rr)``:
+the DCKF's vehicle states (yaw, lateral and longitudinal motion plus the four
+wheel speeds, rad/s) followed by its parameters (four road friction
+coefficients, a random walk). Input ``u = (delta, ax, ay, T_fl, T_fr, T_rl, T_rr)``
+with the measured accelerations for the loads (DICI-GFCKF eq 7) and the motor
+torques (N m, positive driving).
+
+Forces per wheel (:mod:`canest.models.tire`): Magic Formula of the slip angle
+(eq 10) and the slip ratio (eq 11) with peak ``mu Fz`` and friction-independent
+stiffness, limited together by the friction circle. Then (:mod:`canest.models.wheels`)
+the body motion of eqs 1-5 and the wheels ``J dw/dt = T - R Fx`` (eq 6).
+
+Discretization: ``SUBSTEPS`` semi-implicit Euler steps per loop period. A
+wheel's slip dynamics are stiff (time constant ``J v / (R^2 K)``, ~2 ms at
+80 km/h): each wheel speed takes a linearly implicit step
+``w+ = w + h f / (1 - h df/dw)`` with ``df/dw = -R^2 dFx/ds / (J v)`` from the
+Magic Formula's slope, stable for any step; the body states take explicit
+steps with the forces of the substep's start.
+
+Measurements: ``(ax, ay, r, w_fl, w_fr, w_rl, w_rr)`` (the paper's ``Z = (ax, ay, r)``
+plus the wheel-speed sensors, which observe the wheel states).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from canest.config import VehicleParams
+from canest.models.tire import TireModelParams, friction_circle, magic_formula, magic_formula_slope
+from canest.models.wheels import MIN_WHEEL_SPEED, WheelGeometry
+
+STATE_NAMES = ("yaw_rate", "beta", "vx", "w_fl", "w_fr", "w_rl", "w_rr", "mu_fl", "mu_fr", "mu_rl", "mu_rr")
+MEASUREMENT_NAMES = ("ax", "ay", "yaw_rate", "wheel_speed_fl", "wheel_speed_fr", "wheel_speed_rl", "wheel_speed_rr")
+YAW, BETA, VX = 0, 1, 2
+W = slice(3, 7)
+MU = slice(7, 11)
+DELTA, AX, AY = 0, 1, 2
+TORQUE = slice(3, 7)
+PARAMETERS = 4
+SUBSTEPS = 4
+MU_RANGE = (0.05, 1.5)  # the model clips friction to this range
+SENSITIVITY_STEP = 0.02  # mu step of the excitation finite difference
+
+
+class TwoTrackModel:
+    state_names = STATE_NAMES
+    measurement_names = MEASUREMENT_NAMES
+    filter_options = {"parameters": PARAMETERS}  # the dual filter's parameter block: the last four states
+
+    def __init__(self, vehicle: VehicleParams, tire: TireModelParams = TireModelParams()):
+        self.vehicle = vehicle
+        self.tire = tire
+        self.wheels = WheelGeometry(vehicle)
+
+    def forces(self, X: np.ndarray, u: np.ndarray):
+        """Wheel-frame (Fx, Fy), their pure-slip longitudinal slope dFx/ds and the wheel speeds v_long, all (N, 4)."""
+        r, vx = X[:, YAW], np.maximum(X[:, VX], MIN_WHEEL_SPEED)
+        v_long, v_lat = self.wheels.wheel_velocities(r, vx, vx * np.tan(X[:, BETA]), u[DELTA])
+        alpha = self.wheels.slip_angles(v_long, v_lat)
+        slip = self.wheels.slip_ratios(X[:, W], v_long)
+        fz = self.wheels.loads(u[AX], u[AY])
+        peak = np.clip(X[:, MU], *MU_RANGE) * fz
+        t = self.tire
+        long_stiffness = t.longitudinal_stiffness * fz
+        fx = magic_formula(slip, long_stiffness, t.longitudinal_shape, t.longitudinal_curvature, peak)
+        fy = magic_formula(alpha, self.wheels.cornering_stiffness(fz, t), t.lateral_shape, t.lateral_curvature, peak)
+        slope = magic_formula_slope(slip, long_stiffness, t.longitudinal_shape, t.longitudinal_curvature, peak)
+        fx, fy = friction_circle(fx, fy, peak)
+        return fx, fy, slope, np.maximum(v_long, MIN_WHEEL_SPEED)
+
+    def transition(self, X: np.ndarray, u: np.ndarray, dt: float) -> np.ndarray:
+        p = self.vehicle
+        h = dt / SUBSTEPS
+        X = X.copy()
+        for _ in range(SUBSTEPS):
+            fx, fy, slope, v_long = self.forces(X, u)
+            rate = (u[TORQUE] - p.wheel_radius * fx) / p.wheel_inertia
+            stiffness = p.wheel_radius**2 * np.maximum(slope, 0.0) / (p.wheel_inertia * v_long)
+            dr, dbeta, dvx = self.wheels.body_derivatives(X[:, YAW], X[:, BETA], np.maximum(X[:, VX], MIN_WHEEL_SPEED),
+                                                          fx, fy, u[DELTA])
+            X[:, W] += h * rate / (1.0 + h * stiffness)
+            X[:, YAW] += h * dr
+            X[:, BETA] += h * dbeta
+            X[:, VX] += h * dvx
+        return X
+
+    def measure(self, X: np.ndarray, u: np.ndarray) -> np.ndarray:
+        fx, fy, _, _ = self.forces(X, u)
+        ax, ay, _ = self.wheels.body_accelerations(fx, fy, u[DELTA])
+        return np.column_stack([ax, ay, X[:, YAW], X[:, W]])
+
+    def friction_sensitivity(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:
+        """|d|F_ij| / d mu_ij| per wheel (N per unit friction) at the state x: how much a tire says about its mu.
+
+        Near zero while the tire works in its linear range (the force does not
+        depend on the peak), growing as it approaches the friction limit.
+        Central difference; each wheel's force depends only on its own mu, so
+        all four are perturbed at once.
+        """
+        X = np.repeat(x[None, :], 2, axis=0)
+        X[0, MU] += SENSITIVITY_STEP
+        X[1, MU] -= SENSITIVITY_STEP
+        fx, fy, _, _ = self.forces(X, u)
+        magnitude = np.hypot(fx, fy)
+        return np.abs(magnitude[0] - magnitude[1]) / (2.0 * SENSITIVITY_STEP)

@@ -1,0 +1,109 @@
+"""The DICI-GFCKF (fused local filters) and the DCKF (interleaved state and parameter filters)."""
+import numpy as np
+import pytest
+
+from canest.filters import FILTERS, Measurement, Transition
+from canest.filters.dici import DICIGeneralizedFifthDegreeCKF
+from canest.filters.dual import DoubleCubatureKalmanFilter
+from canest.filters.fusion import fuse
+from canest.filters.sigma import GeneralizedFifthDegreeCKF
+
+A = np.array([[1.0, 0.1], [0.0, 0.95]])
+LINEAR = Transition(lambda X, u, dt: X @ A.T)
+H = np.array([[1.0, 0.0]])
+POSITION = Measurement(lambda X, u: X @ H.T)
+Q = np.diag([0.01, 0.02])
+
+
+def test_local_update_from_the_fused_prior_is_the_kalman_update_of_it():
+    """Eqs 35-41 as implemented: each local posterior is the exact Kalman update of the fused prediction."""
+    f = DICIGeneralizedFifthDegreeCKF([1.0, 0.5], np.diag([0.5, 0.3]), process_scale=(1.0, 4.0), initial_scale=(1.0, 3.0))
+    f.predict(LINEAR, None, 0.01, Q)
+    prior_x, prior_P = f.x.copy(), f.P.copy()
+    R1, R2 = np.eye(1) * 0.1, np.eye(1) * 0.4
+    f.update_sets([(np.array([1.2]), POSITION, R1), (np.array([1.1]), POSITION, R2)], None)
+    for local, z, R in zip(f.locals, (1.2, 1.1), (R1, R2)):
+        S = H @ prior_P @ H.T + R
+        K = prior_P @ H.T @ np.linalg.inv(S)
+        np.testing.assert_allclose(local.x, prior_x + K @ (np.array([z]) - H @ prior_x), atol=1e-10)
+        np.testing.assert_allclose(local.P, (np.eye(2) - K @ H) @ prior_P, atol=1e-10)
+    fused = fuse("ici", [lf.x for lf in f.locals], [lf.P for lf in f.locals])
+    np.testing.assert_allclose(f.x, fused.x)
+    np.testing.assert_allclose(f.P, fused.P)
+
+
+def test_identical_local_filters_reduce_to_one_gfckf():
+    x0, P0 = np.array([1.0, 0.5]), np.diag([0.5, 0.3])
+    dici = DICIGeneralizedFifthDegreeCKF(x0, P0, process_scale=(1.0, 1.0), initial_scale=(1.0, 1.0))
+    single = GeneralizedFifthDegreeCKF(x0, P0)
+    for z in (1.1, 1.3, 1.2):
+        for filt in (dici, single):
+            filt.predict(LINEAR, None, 0.01, Q)
+            filt.update(np.array([z]), POSITION, None, np.eye(1) * 0.2)
+    np.testing.assert_allclose(dici.x, single.x, atol=1e-9)
+    np.testing.assert_allclose(dici.P, single.P, atol=1e-9)
+
+
+def test_ici_keeps_a_dominating_local_filter_and_uses_the_other_when_it_is_alone():
+    """ICI cannot prove a worse, possibly correlated source independent: it adds nothing to a dominating one.
+    Its value is redundancy: with the first sensor set silent the second still corrects the state."""
+    f = DICIGeneralizedFifthDegreeCKF([1.0, 0.5], np.diag([0.5, 0.3]))
+    f.predict(LINEAR, None, 0.01, Q)
+    f.update_sets([(np.array([1.2]), POSITION, np.eye(1) * 0.1), (np.array([0.0]), POSITION, np.eye(1) * 0.4)], None)
+    np.testing.assert_allclose(f.x, f.locals[0].x, atol=1e-6)
+    f.predict(LINEAR, None, 0.01, Q)
+    predicted = f.P[0, 0]
+    f.update_sets([None, (np.array([1.2]), POSITION, np.eye(1) * 0.4)], None)
+    assert f.P[0, 0] < predicted
+
+
+def test_dici_paper_defaults_and_fusion_choice():
+    f = FILTERS["dici-gfckf"](np.zeros(7), np.eye(7))
+    assert f.process_scale == (1.0, 10.0) and f.sensor_sets == 2
+    np.testing.assert_allclose(f.locals[1].P, 10 * np.eye(7))
+    with pytest.raises(ValueError, match="fusion"):
+        FILTERS["dici-gfckf"](np.zeros(3), np.eye(3), fusion="mean")
+
+
+# DCKF: a scalar state s and a scalar parameter p; s' = s, measurement z = p * s (+ s to keep s observable)
+STATE_AND_GAIN = Transition(lambda X, u, dt: X)
+PRODUCT = Measurement(lambda X, u: np.column_stack([X[:, 0] * X[:, 1], X[:, 0]]))
+
+
+def test_dckf_interleaves_parameter_update_before_state_update():
+    f = DoubleCubatureKalmanFilter([2.0, 1.0], np.diag([0.1, 0.2]), parameters=1)
+    f.predict(STATE_AND_GAIN, None, 0.01, np.diag([0.01, 0.001]))
+    s_prior, p_prior = f.states.x.copy(), f.params.x.copy()
+    Ps, Pp = f.states.P.copy(), f.params.P.copy()
+    z, R = np.array([3.0, 2.1]), np.diag([0.05, 0.05])
+    f.update(z, PRODUCT, None, R)
+    # step 3 with the state at its prediction: z = p * s_prior is linear in p
+    Hp = np.array([[s_prior[0]], [0.0]])
+    Kp = Pp @ Hp.T @ np.linalg.inv(Hp @ Pp @ Hp.T + R)
+    p_post = p_prior + Kp @ (z - np.array([p_prior[0] * s_prior[0], s_prior[0]]))
+    np.testing.assert_allclose(f.params.x, p_post, atol=1e-9)
+    # step 4 with the parameter at its new estimate: z = (p_post * s, s) is linear in s
+    Hs = np.array([[p_post[0]], [1.0]])
+    Ks = Ps @ Hs.T @ np.linalg.inv(Hs @ Ps @ Hs.T + R)
+    np.testing.assert_allclose(f.states.x, s_prior + Ks @ (z - Hs @ s_prior), atol=1e-9)
+    np.testing.assert_allclose(f.x, np.concatenate([f.states.x, f.params.x]))
+    assert f.P[0, 1] == 0.0  # block diagonal: the dual filter's approximation
+
+
+def test_dckf_frozen_parameters_hold_and_their_variance_stays_bounded():
+    f = DoubleCubatureKalmanFilter([2.0, 0.8], np.diag([0.1, 0.09]), parameters=1)
+    f.frozen = np.array([True])
+    for _ in range(500):
+        f.predict(STATE_AND_GAIN, None, 0.01, np.diag([0.01, 0.001]))
+        f.update(np.array([3.0, 2.0]), PRODUCT, None, np.diag([0.05, 0.05]))
+    assert f.params.x[0] == pytest.approx(0.8)
+    assert f.params.P[0, 0] == pytest.approx(0.09)  # grew to its cap, not beyond
+    f.frozen = np.array([False])
+    f.predict(STATE_AND_GAIN, None, 0.01, np.diag([0.01, 0.001]))
+    f.update(np.array([3.0, 2.0]), PRODUCT, None, np.diag([0.05, 0.05]))
+    assert f.params.x[0] > 1.0 and f.params.P[0, 0] < 0.09  # learning again: z/s = 1.5
+
+
+def test_dckf_needs_a_parameter_block():
+    with pytest.raises(ValueError, match="parameters"):
+        DoubleCubatureKalmanFilter(np.zeros(3), np.eye(3), parameters=3)
