@@ -9,7 +9,7 @@ wheel accelerations (DICI-GFCKF eq 4, :mod:`canest.models.wheel_force`).
 :class:`FrictionEstimator` runs the 7-DOF two-track model of
 :mod:`canest.models.two_track` with the double CKF (``dckf``). Friction is
 observable only while a tire works near its limit: each tick, a wheel whose
-force sensitivity ``|dF/dmu|`` at the current estimate is below
+force sensitivity ``|dF/dmu|`` one standard deviation below its estimate is below
 ``estimator.friction_excitation`` (N per unit mu) is frozen for the dual
 filter's parameter update (value held; variance growing up to its initial
 value, :mod:`canest.filters.dual`). The CAN flags ``Mu..Observable`` say which
@@ -173,16 +173,18 @@ class FrictionEstimator(_ChannelEstimator):
         return self._diverged(t)
 
     def _plausibly_lower_friction(self) -> np.ndarray:
-        """The state with each friction two standard deviations lower.
+        """The state with each friction one standard deviation lower (not below ice, ``LOWEST_FRICTION``).
 
-        A tire says something about its friction if it would work near its
-        limit at some friction the estimate still allows. Testing the
-        sensitivity at the estimate itself would never open the gate for an
-        overestimated friction (the tire looks far from a limit that is too high).
+        A tire says something about its friction if it works near its limit at
+        a friction the estimate still allows. Testing at the estimate itself
+        never opens the gate for an overestimated friction; testing far below
+        it (two standard deviations) opens it where the data only bound the
+        friction from below, and a Gaussian filter fed that one-sided evidence
+        every tick ratchets the estimate up (measured: 0.85 -> 1.3, the bound).
         """
         x = self.filter.x.copy()
         std = np.sqrt(np.maximum(np.diag(self.filter.P)[two_track.MU], 0.0))
-        x[two_track.MU] -= 2.0 * std
+        x[two_track.MU] = np.maximum(x[two_track.MU] - 1.0 * std, two_track.LOWEST_FRICTION)
         return x
 
     def _extra_values(self, values: dict, valid: dict, std: np.ndarray, inputs: _Inputs, lateral_ok: bool) -> None:

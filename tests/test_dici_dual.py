@@ -77,9 +77,10 @@ def test_dckf_interleaves_parameter_update_before_state_update():
     Ps, Pp = f.states.P.copy(), f.params.P.copy()
     z, R = np.array([3.0, 2.1]), np.diag([0.05, 0.05])
     f.update(z, PRODUCT, None, R)
-    # step 3 with the state at its prediction: z = p * s_prior is linear in p
+    # step 3 with the state at its prediction: z = p * s_prior is linear in p; the state's spread adds to R
     Hp = np.array([[s_prior[0]], [0.0]])
-    Kp = Pp @ Hp.T @ np.linalg.inv(Hp @ Pp @ Hp.T + R)
+    Hs_prior = np.array([[p_prior[0]], [1.0]])
+    Kp = Pp @ Hp.T @ np.linalg.inv(Hp @ Pp @ Hp.T + R + Hs_prior @ Ps @ Hs_prior.T)
     p_post = p_prior + Kp @ (z - np.array([p_prior[0] * s_prior[0], s_prior[0]]))
     np.testing.assert_allclose(f.params.x, p_post, atol=1e-9)
     # step 4 with the parameter at its new estimate: z = (p_post * s, s) is linear in s
@@ -102,6 +103,28 @@ def test_dckf_frozen_parameters_hold_and_their_variance_stays_bounded():
     f.predict(STATE_AND_GAIN, None, 0.01, np.diag([0.01, 0.001]))
     f.update(np.array([3.0, 2.0]), PRODUCT, None, np.diag([0.05, 0.05]))
     assert f.params.x[0] > 1.0 and f.params.P[0, 0] < 0.09  # learning again: z/s = 1.5
+
+
+def test_dckf_equals_the_kalman_filter_on_a_decoupled_linear_system():
+    """States and parameters that do not interact: the dual filter's block-diagonal covariance is exact."""
+    F = np.diag([0.98, 1.0, 1.0])  # two states (one observed), one random-walk parameter
+    F[0, 1] = 0.1
+    H = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+    Q, R = np.diag([0.01, 0.02, 0.001]), np.diag([0.2, 0.3])
+    transition = Transition(lambda X, u, dt: X @ F.T)
+    measurement = Measurement(lambda X, u: X @ H.T)
+    f = DoubleCubatureKalmanFilter(np.zeros(3), np.eye(3), parameters=1)
+    x, P = np.zeros(3), np.eye(3)
+    rng = np.random.default_rng(5)
+    for _ in range(40):
+        z = rng.standard_normal(2)
+        x, P = F @ x, F @ P @ F.T + Q
+        K = P @ H.T @ np.linalg.inv(H @ P @ H.T + R)
+        x, P = x + K @ (z - H @ x), (np.eye(3) - K @ H) @ P
+        f.predict(transition, None, 0.01, Q)
+        f.update(z, measurement, None, R)
+        np.testing.assert_allclose(f.x, x, atol=1e-9)
+        np.testing.assert_allclose(f.P, P, atol=1e-9)
 
 
 def test_dckf_needs_a_parameter_block():

@@ -40,13 +40,16 @@ TORQUE = slice(3, 7)
 PARAMETERS = 4
 SUBSTEPS = 4
 MU_RANGE = (0.05, 1.5)  # the model clips friction to this range
+LOWEST_FRICTION = 0.1  # ice: the lowest friction a road is assumed to have
+HIGHEST_FRICTION = 1.3  # race tires on dry asphalt
 SENSITIVITY_STEP = 0.02  # mu step of the excitation finite difference
 
 
 class TwoTrackModel:
     state_names = STATE_NAMES
     measurement_names = MEASUREMENT_NAMES
-    filter_options = {"parameters": PARAMETERS}  # the dual filter's parameter block: the last four states
+    # the dual filter's parameter block: the last four states, within the frictions a road can have
+    filter_options = {"parameters": PARAMETERS, "parameter_bounds": (LOWEST_FRICTION, HIGHEST_FRICTION)}
 
     def __init__(self, vehicle: VehicleParams, tire: TireModelParams = TireModelParams()):
         self.vehicle = vehicle

@@ -14,7 +14,8 @@ from typing import Callable, Optional
 import numpy as np
 
 from canest.config import VehicleParams
-from canest.sim.plant import AIR_DENSITY, DRAG_AREA, GRAVITY
+from canest.models.wheels import GRAVITY
+from canest.sim.plant import AIR_DENSITY, DRAG_AREA
 from canest.sim.tire import TireParams
 
 # ISO 3888-1 double lane change: entry 15 m, offset transition 30 m, offset lane

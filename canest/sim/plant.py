@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from canest.config import VehicleParams
-from canest.models.wheels import FRONT, GRAVITY, WheelGeometry  # noqa: F401 (GRAVITY re-exported)
+from canest.models.wheels import FRONT, WheelGeometry
 from canest.sim.tire import TireParams, combined_forces
 
 AIR_DENSITY = 1.2

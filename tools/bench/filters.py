@@ -1,14 +1,22 @@
 #!/usr/bin/env python3
-"""Filter step cost: median and p99 microseconds per predict + update on the 3-DOF model.
+"""Filter step cost: median and p99 microseconds per predict + update, per model.
 
-    python tools/bench/filters.py                 # every filter, 2000 steps each
+    python tools/bench/filters.py                 # every filter on every model, 2000 steps each
     python tools/bench/filters.py --steps 200     # the CI smoke run
 
-Each filter runs the estimator's own Transition and Measurement (RK4 single-
-track model, measurements ay, yaw rate, wheel speed, all three every step) on
-inputs from a simulated sine steer. filterpy's UnscentedKalmanFilter runs the
-same model functions (one point at a time, as its API requires) in the same
-run as the reference; it is a benchmark-only dependency (pip install filterpy).
+Each filter runs the estimator's own Transition and Measurement on inputs of a
+sine steer, every measurement every step:
+
+* 3-DOF single track (RK4; ay, yaw rate, wheel speed): every filter but dckf;
+* 7-state tire-force model (RK4; ax, ay, yaw rate, wheel speed): the
+  sigma-point filters (the EKF family needs Jacobians this model does not
+  have); ``dici-gfckf`` updates its two local filters with one IMU each
+  (ax, ay, yaw rate of IMU 1 or 2, plus the wheel speed);
+* 7-DOF two-track model with friction (11 states): ``dckf``.
+
+filterpy's UnscentedKalmanFilter runs the same model functions (one point at a
+time, as its API requires) in the same run as the reference; it is a
+benchmark-only dependency (pip install filterpy).
 """
 import argparse
 import sys
@@ -22,12 +30,49 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 from canest.config import DEFAULT_CONFIG, load_config  # noqa: E402
 from canest.filters import FILTERS, Measurement, Transition  # noqa: E402
 from canest.models.single_track import SingleTrackModel  # noqa: E402
+from canest.models.tire_force import TireForceModel  # noqa: E402
+from canest.models.two_track import TwoTrackModel  # noqa: E402
+
+LINEARIZING = ("ekf", "dekf", "lmrwekf")
 
 
-def inputs(steps):
+def steering(steps):
     t = np.arange(steps) * 0.01
-    delta = np.radians(3.0) * np.sin(2 * np.pi * t / 4.0)
-    return [np.array([d, 0.1, 1.0]) for d in delta]
+    return np.radians(3.0) * np.sin(2 * np.pi * t / 4.0)
+
+
+def single_track_case(vehicle, steps):
+    model = SingleTrackModel(vehicle)
+    us = [np.array([d, 0.1, 1.0]) for d in steering(steps)]
+    x0, P0 = np.array([0.0, 0.0, 22.0]), np.diag([0.05, 0.05, 2.0]) ** 2
+    Q, R = np.diag([0.05, 0.01, 0.3]) ** 2 * 0.01, np.diag([0.15, 0.005, 0.15]) ** 2
+    names = [n for n in FILTERS if n != "dckf"]
+    return model, us, x0, P0, Q, R, np.array([0.5, 0.02, 22.0]), names, slice(0, 3)
+
+
+def tire_force_case(vehicle, steps):
+    model = TireForceModel(vehicle)
+    us = [np.array([d, 0.1, 22.0 * d * 5.0, 30.0, 30.0, 30.0, 30.0]) for d in steering(steps)]
+    x0, P0 = np.array([0.0, 0.0, 22.0, 0.0, 0.0, 0.0, 0.0]), np.diag([0.05, 0.05, 2.0, 1e3, 1e3, 1e3, 1e3]) ** 2
+    Q = np.diag([0.05, 0.01, 0.3, 3e3, 3e3, 3e3, 3e3]) ** 2 * 0.01
+    R = np.diag([0.15, 0.15, 0.005, 0.15]) ** 2
+    names = [n for n in FILTERS if n not in LINEARIZING + ("dckf",)]
+    return model, us, x0, P0, Q, R, np.array([0.1, 0.5, 0.02, 22.0]), names, slice(0, 4)
+
+
+def two_track_case(vehicle, steps):
+    model = TwoTrackModel(vehicle)
+    us = [np.array([d, 0.1, 22.0 * d * 5.0, 50.0, 50.0, 50.0, 50.0]) for d in steering(steps)]
+    w0 = 22.0 / vehicle.wheel_radius
+    x0 = np.array([0.0, 0.0, 22.0, w0, w0, w0, w0, 0.9, 0.9, 0.9, 0.9])
+    P0 = np.diag([0.05, 0.05, 2.0, 1.0, 1.0, 1.0, 1.0, 0.3, 0.3, 0.3, 0.3]) ** 2
+    Q = np.diag([0.05, 0.01, 0.3, 5.0, 5.0, 5.0, 5.0, 0.1, 0.1, 0.1, 0.1]) ** 2 * 0.01
+    R = np.diag([0.15, 0.15, 0.005, 0.1, 0.1, 0.1, 0.1]) ** 2
+    return model, us, x0, P0, Q, R, np.array([0.1, 0.5, 0.02, w0, w0, w0, w0]), ["dckf"], slice(0, 7)
+
+
+CASES = {"3-DOF single track": single_track_case, "7-state tire forces": tire_force_case,
+         "7-DOF two track + friction": two_track_case}
 
 
 def timed(step, us):
@@ -39,28 +84,35 @@ def timed(step, us):
     return np.median(times) * 1e6, np.percentile(times, 99) * 1e6
 
 
-def bench_canest(name, model, us, x0, P0, Q, R, z):
-    mask = np.ones(3, dtype=bool)
-    transition = Transition(model.transition, model.transition_jacobian)
-    measurement = Measurement(model.measure, model.measure_jacobian, (0, 1, 2), model.measure_parameter_jacobian)
-    filt = FILTERS[name](x0, P0)
+def bench_canest(name, model, us, x0, P0, Q, R, z, rows):
+    transition = Transition(model.transition, getattr(model, "transition_jacobian", None))
+    measurement = Measurement(lambda X, u: model.measure(X, u)[:, rows], getattr(model, "measure_jacobian", None),
+                              tuple(range(z.size)), getattr(model, "measure_parameter_jacobian", None))
+    filt = FILTERS[name](x0, P0, **getattr(model, "filter_options", {}))
+    if hasattr(filt, "sensor_sets") and isinstance(model, TireForceModel):  # one IMU per local filter
+        imu_2 = Measurement(lambda X, u: model.measure(X, u)[:, [4, 5, 6, 3]])
+        sets = [(z, measurement, R), (z, imu_2, R * 2.0)]
 
-    def step(u):
-        filt.predict(transition, u, 0.01, Q)
-        filt.update(z, measurement, u, R)
+        def step(u):
+            filt.predict(transition, u, 0.01, Q)
+            filt.update_sets(sets, u)
+    else:
+        def step(u):
+            filt.predict(transition, u, 0.01, Q)
+            filt.update(z, measurement, u, R)
 
-    assert mask.all()
     return timed(step, us)
 
 
-def bench_filterpy(model, us, x0, P0, Q, R, z):
+def bench_filterpy(model, us, x0, P0, Q, R, z, rows):
     from filterpy.kalman import MerweScaledSigmaPoints, UnscentedKalmanFilter
 
     holder = {}
-    ukf = UnscentedKalmanFilter(dim_x=3, dim_z=3, dt=0.01,
+    n = x0.size
+    ukf = UnscentedKalmanFilter(dim_x=n, dim_z=z.size, dt=0.01,
                                 fx=lambda x, dt: model.transition(x[None, :], holder["u"], dt)[0],
-                                hx=lambda x: model.measure(x[None, :], holder["u"])[0],
-                                points=MerweScaledSigmaPoints(3, alpha=1.0, beta=2.0, kappa=0.0))
+                                hx=lambda x: model.measure(x[None, :], holder["u"])[0, rows],
+                                points=MerweScaledSigmaPoints(n, alpha=1.0, beta=2.0, kappa=3.0 - n))
     ukf.x, ukf.P, ukf.Q, ukf.R = x0.copy(), P0.copy(), Q, R
 
     def step(u):
@@ -76,17 +128,22 @@ def main():
     parser.add_argument("--steps", type=int, default=2000)
     parser.add_argument("--filters", default="all")
     args = parser.parse_args()
-    model = SingleTrackModel(load_config(DEFAULT_CONFIG).vehicle)
-    us = inputs(args.steps)
-    x0, P0 = np.array([0.0, 0.0, 22.0]), np.diag([0.05, 0.05, 2.0]) ** 2
-    Q, R = np.diag([0.05, 0.01, 0.3]) ** 2 * 0.01, np.diag([0.15, 0.005, 0.15]) ** 2
-    z = np.array([0.5, 0.02, 22.0])
-    names = list(FILTERS) if args.filters == "all" else args.filters.split(",")
-    rows = [(name, *bench_canest(name, model, us, x0, P0, Q, R, z)) for name in names]
+    vehicle = load_config(DEFAULT_CONFIG).vehicle
+    for title, case in CASES.items():
+        model, us, x0, P0, Q, R, z, names, rows = case(vehicle, args.steps)
+        if args.filters != "all":
+            names = [n for n in args.filters.split(",") if n in names]
+        if names:
+            report(title, [(name, *bench_canest(name, model, us, x0, P0, Q, R, z, rows)) for name in names],
+                   model, us, x0, P0, Q, R, z, rows)
+
+
+def report(title, rows, *case):
     try:
-        reference = bench_filterpy(model, us, x0, P0, Q, R, z)
+        reference = bench_filterpy(*case)
     except ImportError:
         reference = None
+    print(f"\n{title}")
     print(f"{'filter':<22} {'median us':>10} {'p99 us':>9} {'vs filterpy UKF':>16}")
     for name, median, p99 in rows:
         ratio = f"{median / reference[0]:.2f}x" if reference else "-"
