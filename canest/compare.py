@@ -52,9 +52,10 @@ def run_filter(config: Config, log_path, truth: dict, name: str, skip: float = 0
     config = with_filter(config, name) if name != config.estimator.filter else config
     repairs = replay(config, log_path, progress=False, on_estimate=collect, step_times=step_times)["repairs"]
     table = {"t": np.array([e.t for e in estimates]), "valid": np.array([e.valid_flags for e in estimates])}
-    for state in (*STATES, "vy"):
+    for state in estimates[-1].values:
         table[state] = np.array([e.values[state] for e in estimates])
-    scores = {s.state: s for s in score(table, truth, STATES, skip=skip)}
+    states = [s for s in DISPLAY if s in table and s in truth and s != "vy"]  # forces and friction where estimated
+    scores = {s.state: s for s in score(table, truth, states, skip=skip)}
     return FilterRun(name, table, scores, float(np.median(step_times)) * 1e6 if step_times else float("nan"), repairs)
 
 
@@ -67,13 +68,16 @@ def parse_filters(text: str) -> list:
 
 
 def format_comparison(runs, title: str = "") -> str:
-    header = " | ".join(f"{state} [{DISPLAY[state][0]}] RMSE   MAE " for state in STATES)
+    """RMSE and MAE per state and filter; states a filter does not estimate (forces, friction) show '-'."""
+    states = [s for s in DISPLAY if any(s in run.scores for run in runs)]
+    header = " | ".join(f"{state} [{DISPLAY[state][0]}] RMSE   MAE " for state in states)
     lines = [title] if title else []
-    lines.append(f"{'filter':<9} | {header} | us/step")
+    lines.append(f"{'filter':<10} | {header} | us/step")
     for run in runs:
-        cells = " | ".join(f"{run.scores[s].rmse:>{len(s) + len(DISPLAY[s][0]) + 8}.4f} {run.scores[s].mae:.4f}"
-                           for s in STATES)
-        lines.append(f"{run.name:<9} | {cells} | {run.step_us:7.1f}")
+        cells = " | ".join(
+            f"{run.scores[s].rmse:>{len(s) + len(DISPLAY[s][0]) + 8}.4f} {run.scores[s].mae:.4f}" if s in run.scores
+            else f"{'-':>{len(s) + len(DISPLAY[s][0]) + 15}}" for s in states)
+        lines.append(f"{run.name:<10} | {cells} | {run.step_us:7.1f}")
     return "\n".join(lines)
 
 

@@ -13,6 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from canest.estimator import VALID_BITS
+from canest.signals import WHEELS
 
 # state -> (display unit, factor from SI)
 DISPLAY = {
@@ -20,6 +21,8 @@ DISPLAY = {
     "vy": ("m/s", 1.0),
     "beta": ("deg", 180.0 / math.pi),
     "yaw_rate": ("deg/s", 180.0 / math.pi),
+    **{f"fy_{w}": ("N", 1.0) for w in WHEELS},
+    **{f"mu_{w}": ("-", 1.0) for w in WHEELS},
 }
 
 

@@ -76,13 +76,19 @@ def test_compare_every_filter_on_one_log(dlc_run, tmp_path):
     out = canest("compare", log, truth, "--filters", "all", "--plot", tmp_path / "compare.png").stdout
     from canest.filters import FILTERS
 
+    header = next(line for line in out.splitlines() if line.startswith("filter")).split("|")
+    column = {cell.split()[0]: i for i, cell in enumerate(header)}
     table = [line for line in out.splitlines() if "|" in line and not line.startswith("filter")]
     assert [line.split("|")[0].strip() for line in table] == list(FILTERS)
     for line in table:
         cells = line.split("|")
-        vx_rmse, yaw_rmse, beta_rmse = (float(cells[i].split()[0]) for i in (1, 2, 3))
+        vx_rmse, yaw_rmse, beta_rmse = (float(cells[column[s]].split()[0]) for s in ("vx", "yaw_rate", "beta"))
         assert vx_rmse < 0.1 and yaw_rmse < 0.3 and beta_rmse < 0.5, line
-        assert float(cells[4]) > 0
+        assert float(cells[-1]) > 0
+    rows = {line.split("|")[0].strip(): line.split("|") for line in table}
+    assert float(rows["dici-gfckf"][column["fy_fl"]].split()[0]) < 200  # forces scored where estimated
+    assert rows["ckf"][column["fy_fl"]].strip() == "-"
+    assert rows["dckf"][column["mu_fl"]].strip() != "-"
     assert (tmp_path / "compare.png").stat().st_size > 20000
 
 

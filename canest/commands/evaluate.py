@@ -17,7 +17,7 @@ def register(subparsers) -> None:
                               description=__doc__, epilog=EPILOG, formatter_class=FORMATTER)
     p.add_argument("estimate", help="estimate CSV from canest replay/run/demo")
     p.add_argument("truth", help="truth CSV from canest simulate")
-    p.add_argument("--states", default=",".join(DISPLAY), help=f"comma-separated states (default {','.join(DISPLAY)})")
+    p.add_argument("--states", help=f"comma-separated states (default: those of {','.join(DISPLAY)} in both files)")
     p.add_argument("--skip", type=float, default=0.5, help="seconds at the start to leave out (default 0.5)")
     p.add_argument("--all", action="store_true", help="score every tick, valid or not")
     p.add_argument("--plot", help="write a PNG of estimate vs truth (needs matplotlib)")
@@ -26,7 +26,10 @@ def register(subparsers) -> None:
 
 def run(args) -> int:
     estimate, truth = read_table(args.estimate), read_table(args.truth)
-    states = [s.strip() for s in args.states.split(",") if s.strip()]
+    if args.states is None:
+        states = [s for s in DISPLAY if s in estimate and s in truth]
+    else:
+        states = [s.strip() for s in args.states.split(",") if s.strip()]
     for state in states:
         for table, path in ((estimate, args.estimate), (truth, args.truth)):
             if state not in table:
