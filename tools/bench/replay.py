@@ -108,7 +108,7 @@ def memory_run(config, log_path, span, hours):
 def main():
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--minutes", type=float, default=10.0)
-    parser.add_argument("--filters", default="ckf,mcsckf", help="default filter first, then the heaviest")
+    parser.add_argument("--filters", default="ckf,dici-gfckf", help="default filter first, then the heaviest")
     parser.add_argument("--hours", type=float, default=1.0, help="length of the memory run (0: skip)")
     args = parser.parse_args()
     config = load_config(DEFAULT_CONFIG)
