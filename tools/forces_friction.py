@@ -11,7 +11,8 @@ lateral forces on the 80 km/h double lane change and a 65 km/h slalom, mu 0.85.
 Friction (``dckf``): per wheel, the time from the start of excitation (the first
 tick at which the true tire uses more than half its friction) until the estimate
 is first within 0.1 of the truth, and the RMSE from the excitation start on; on
-high (0.85) and low (0.35) friction and a split-mu road (left 0.85, right 0.35).
+high (0.85) and low (0.35) friction, a split-mu road (left 0.85, right 0.35)
+and a straight acceleration ramp (longitudinal excitation) on high and low friction.
 The simulator's plant is not the estimators' model (tire parameters, load
 sensitivity, load-transfer lag, relaxation, combined slip all differ).
 """
@@ -32,7 +33,8 @@ from canest.sim.simulate import simulate  # noqa: E402
 
 FORCE_FILTERS = ("dici-gfckf", "gfckf", "ckf")
 FORCE_CASES = (("dlc", 80, 0.85), ("slalom", 65, 0.85))
-FRICTION_CASES = (("sine", 80, 0.85), ("sine", 50, 0.35), ("step", 60, [0.85, 0.35, 0.85, 0.35]))
+FRICTION_CASES = (("sine", 80, 0.85), ("sine", 50, 0.35), ("step", 60, [0.85, 0.35, 0.85, 0.35]),
+                  ("launch", 40, 0.85), ("launch", 40, 0.35))
 SKIP = 0.5  # s
 EXCITED_USAGE = 0.5
 CONVERGED = 0.1

@@ -26,11 +26,14 @@ def register(subparsers) -> None:
                               description=__doc__, epilog=EPILOG, formatter_class=FORMATTER)
     add_config(p)
     p.add_argument("--maneuver", "-m", choices=MANEUVERS, default="dlc",
-                   help="dlc: ISO 3888-1 double lane change; slalom; sine: 4 s period steering; step (default dlc)")
+                   help="dlc: ISO 3888-1 double lane change; slalom; sine: 4 s period steering; step; "
+                        "launch: straight acceleration ramp with traction control (default dlc)")
     p.add_argument("--speed", type=float, default=80.0, help="target speed in km/h (default 80)")
     p.add_argument("--mu", default="0.85", help="road friction, one value or four (fl,fr,rl,rr) (default 0.85)")
     p.add_argument("--duration", type=float, help="seconds to simulate (default: per maneuver)")
-    p.add_argument("--amplitude", type=float, help="steering wheel amplitude in deg for sine/step (default 60/45)")
+    p.add_argument("--amplitude", type=float,
+                   help="steering wheel amplitude in deg for sine/step (default 60/45); peak acceleration demand "
+                        "in m/s^2 for launch (default 6)")
     p.add_argument("--noise-scale", type=float, default=1.0, help="multiply every sensor noise and bias (default 1)")
     p.add_argument("--outliers", type=float, default=0.0,
                    help="probability per sample of a heavy-tailed (Student-t) outlier (default 0)")

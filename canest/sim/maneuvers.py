@@ -3,7 +3,11 @@
 Path maneuvers (``dlc``, ``slalom``) give a reference path y(X) that a
 pure-pursuit driver with preview follows; open-loop maneuvers (``sine``,
 ``step``) give the steering wheel angle as a function of time. A PI speed
-controller holds the target speed with the four motor torques.
+controller holds the target speed with the four motor torques; ``launch``
+drives straight and asks for an acceleration ramping up to ``amplitude`` m/s^2
+(default 6) over 3 s, then coasts, with a traction control that takes torque
+off a wheel whose slip ratio passes ``TRACTION_SLIP``: on a low-friction road the
+driven tires reach their limit (the longitudinal excitation friction needs).
 """
 from __future__ import annotations
 
@@ -43,6 +47,7 @@ class Maneuver:
     duration: float
     path: Optional[Callable[[float], float]] = None  # y_ref(X), m
     steering_wheel: Optional[Callable[[float], float]] = None  # swa(t), rad
+    acceleration: Optional[Callable[[float], float]] = None  # open-loop acceleration demand(t), m/s^2
     start_x: float = 0.0
 
 
@@ -67,10 +72,15 @@ def make_maneuver(name: str, speed: float, amplitude_deg: Optional[float] = None
         amp = math.radians(45.0 if amplitude_deg is None else amplitude_deg)
         return Maneuver(name, duration or 8.0,
                         steering_wheel=lambda t: amp * min(max((t - LEAD_TIME) / 0.2, 0.0), 1.0))
+    if name == "launch":
+        peak = 6.0 if amplitude_deg is None else amplitude_deg
+        ramp = 3.0
+        return Maneuver(name, duration or LEAD_TIME + ramp + 2.0, steering_wheel=lambda t: 0.0,
+                        acceleration=lambda t: peak * (t - LEAD_TIME) / ramp if LEAD_TIME < t <= LEAD_TIME + ramp else 0.0)
     raise ValueError(f"unknown maneuver '{name}'; choose one of {', '.join(MANEUVERS)}")
 
 
-MANEUVERS = ("dlc", "slalom", "sine", "step")
+MANEUVERS = ("dlc", "slalom", "sine", "step", "launch")
 
 
 class Driver:
@@ -82,6 +92,8 @@ class Driver:
     SPEED_GAIN = 0.8  # 1/s, P gain on speed error as acceleration demand
     SPEED_INTEGRAL = 0.2  # 1/s^2
     MAX_TORQUE = 1200.0  # N m per motor
+    TRACTION_SLIP = 0.1  # slip ratio where traction control starts to take torque off
+    TRACTION_BAND = 0.05  # slip ratio over which it takes all of it
 
     def __init__(self, vehicle: VehicleParams, maneuver: Maneuver, target_speed: float):
         self.p = vehicle
@@ -103,11 +115,17 @@ class Driver:
         self.delta += (command - self.delta) * min(dt / self.STEER_LAG, 1.0)
         return self.delta * self.p.steering_ratio
 
-    def motor_torques(self, vx: float, dt: float) -> np.ndarray:
-        """Equal torque on the four motors from a PI speed controller with drag feed-forward."""
-        error = self.target_speed - vx
-        self.speed_integral += error * dt
-        demand = self.SPEED_GAIN * error + self.SPEED_INTEGRAL * self.speed_integral
+    def motor_torques(self, t: float, vx: float, wheel_speeds: np.ndarray, dt: float) -> np.ndarray:
+        """Equal torque on the four motors (PI speed control, or the maneuver's acceleration), less traction control."""
         drag = 0.5 * AIR_DENSITY * DRAG_AREA * vx * abs(vx) + TireParams().rolling_resistance * self.p.mass * GRAVITY
+        if self.maneuver.acceleration is not None:
+            demand = self.maneuver.acceleration(t)
+            drag = 0.0 if demand == 0.0 else drag
+        else:
+            error = self.target_speed - vx
+            self.speed_integral += error * dt
+            demand = self.SPEED_GAIN * error + self.SPEED_INTEGRAL * self.speed_integral
         total = self.p.mass * demand * self.p.wheel_radius + drag * self.p.wheel_radius
-        return np.full(4, float(np.clip(total / 4.0, -self.MAX_TORQUE, self.MAX_TORQUE)))
+        slip = (wheel_speeds * self.p.wheel_radius - vx) / max(vx, 1.0)
+        traction = np.clip(1.0 - (slip - self.TRACTION_SLIP) / self.TRACTION_BAND, 0.0, 1.0)
+        return np.clip(total / 4.0, -self.MAX_TORQUE, self.MAX_TORQUE) * traction

@@ -85,7 +85,7 @@ def simulate(config: Config, maneuver: str, speed_kmh: float, mu, *, duration=No
         t = k * PLANT_DT
         if k % control_every == 0:
             swa = driver.steering_wheel_angle(t, state[X], state[Y], state[PSI], state[VX], CONTROL_DT)
-            torque = driver.motor_torques(state[VX], CONTROL_DT)
+            torque = driver.motor_torques(t, state[VX], state[W], CONTROL_DT)
         delta = swa / config.vehicle.steering_ratio
         _, outputs = plant.derivatives(state, delta, torque)
         if k % truth_every == 0:
