@@ -130,3 +130,4 @@ def test_dckf_equals_the_kalman_filter_on_a_decoupled_linear_system():
 def test_dckf_needs_a_parameter_block():
     with pytest.raises(ValueError, match="parameters"):
         DoubleCubatureKalmanFilter(np.zeros(3), np.eye(3), parameters=3)
+
