@@ -84,6 +84,10 @@ class _Inputs:
     def any_fresh(self, *names) -> bool:
         return any(self.fresh.get(name, False) for name in names)
 
+    def current(self, name: str) -> float:
+        """The held value if it is present and not stale, else 0."""
+        return self.values[name] if self.has(name) else 0.0
+
 
 def make_filter(est, x0, P0, **model_options):
     """The configured filter; ``factorization`` only when the config sets it (else the filter's default).
@@ -176,10 +180,12 @@ class Estimator:
         self.low_speed = x0[VX] < self.est.min_speed
         return True
 
+    def _road_wheel_angle(self, inputs: _Inputs) -> float:
+        return inputs.values.get("steering_wheel_angle", 0.0) / self.vehicle.steering_ratio
+
     def _control(self, inputs: _Inputs, t: float) -> np.ndarray:
         """u = (road wheel angle, ax, cornering stiffness scale 1)."""
-        steering = inputs.values.get("steering_wheel_angle", 0.0)
-        return np.array([steering / self.vehicle.steering_ratio, inputs.values["ax"] if inputs.has("ax") else 0.0, 1.0])
+        return np.array([self._road_wheel_angle(inputs), inputs.current("ax"), 1.0])
 
     def _choose_mode(self) -> None:
         vx = self.filter.x[VX]

@@ -42,6 +42,7 @@ TORQUES = INPUT_GROUPS["motor_torques"]
 LATERAL_FORCES = tuple(f"fy_{w}" for w in WHEELS)
 FRICTIONS = tuple(f"mu_{w}" for w in WHEELS)
 MU_VALID_STD = 0.15
+SENSOR_SETS = np.array(tire_force.SENSOR_SETS)
 
 # Which input sample feeds each measurement channel, and whether it is a lateral channel (not at low speed).
 CHANNEL_INPUTS = {
@@ -81,11 +82,9 @@ class _ChannelEstimator(Estimator):
     def _torques(self, inputs: _Inputs) -> np.ndarray:
         return np.array([inputs.values.get(name, 0.0) for name in TORQUES])
 
-    def _accelerations(self, inputs: _Inputs) -> tuple[float, float]:
-        return (inputs.values["ax"] if inputs.has("ax") else 0.0, inputs.values["ay"] if inputs.has("ay") else 0.0)
-
-    def _steer(self, inputs: _Inputs) -> float:
-        return inputs.values.get("steering_wheel_angle", 0.0) / self.vehicle.steering_ratio
+    @staticmethod
+    def _accelerations(inputs: _Inputs) -> tuple[float, float]:
+        return inputs.current("ax"), inputs.current("ay")
 
 
 class TireForceEstimator(_ChannelEstimator):
@@ -112,12 +111,12 @@ class TireForceEstimator(_ChannelEstimator):
         speeds = [inputs.values.get(name, 0.0) for name in WHEEL_SPEEDS]
         fx = longitudinal_forces(self._torques(inputs), self.wheel_acceleration.update(t, speeds),
                                  self.vehicle.wheel_inertia, self.vehicle.wheel_radius)
-        return np.array([self._steer(inputs), *self._accelerations(inputs), *fx])
+        return np.array([self._road_wheel_angle(inputs), *self._accelerations(inputs), *fx])
 
     def _update(self, inputs: _Inputs, u: np.ndarray, lateral_ok: bool, t: float) -> bool:
         """Non-DICI filters use the first IMU; ``dici-gfckf`` gives local filter j the rows of IMU j."""
         mask, z = self._channel_mask(inputs, lateral_ok)
-        sets = np.array(tire_force.SENSOR_SETS)
+        sets = SENSOR_SETS
         if not hasattr(self.filter, "sensor_sets"):
             mask &= sets <= 1
             if not mask.any():
@@ -132,10 +131,9 @@ class TireForceEstimator(_ChannelEstimator):
         return self._diverged(t)
 
     def _extra_values(self, values: dict, valid: dict, std: np.ndarray, inputs: _Inputs, lateral_ok: bool) -> None:
-        x = self.filter.x
         ok = lateral_ok and inputs.has(*TORQUES, *WHEEL_SPEEDS)
-        for name, i in zip(LATERAL_FORCES, range(3, 7)):
-            values[name], values[f"{name}_std"] = x[i], std[i]
+        for name, force, force_std in zip(LATERAL_FORCES, self.filter.x[tire_force.FY], std[tire_force.FY]):
+            values[name], values[f"{name}_std"] = force, force_std
             valid[name] = ok
         valid["forces"] = ok
 
@@ -160,7 +158,7 @@ class FrictionEstimator(_ChannelEstimator):
 
     def _control(self, inputs: _Inputs, t: float) -> np.ndarray:
         """u = (delta, ax, ay, motor torque per wheel)."""
-        return np.array([self._steer(inputs), *self._accelerations(inputs), *self._torques(inputs)])
+        return np.array([self._road_wheel_angle(inputs), *self._accelerations(inputs), *self._torques(inputs)])
 
     def _update(self, inputs: _Inputs, u: np.ndarray, lateral_ok: bool, t: float) -> bool:
         mask, z = self._channel_mask(inputs, lateral_ok)
@@ -179,8 +177,8 @@ class FrictionEstimator(_ChannelEstimator):
         a friction the estimate still allows. Testing at the estimate itself
         never opens the gate for an overestimated friction; testing far below
         it (two standard deviations) opens it where the data only bound the
-        friction from below, and a Gaussian filter fed that one-sided evidence
-        every tick ratchets the estimate up (measured: 0.85 -> 1.3, the bound).
+        friction from below (measured on high friction: the estimates fell to
+        0.1-0.6; README "Tire forces and road friction").
         """
         x = self.filter.x.copy()
         std = np.sqrt(np.maximum(np.diag(self.filter.P)[two_track.MU], 0.0))
@@ -188,10 +186,10 @@ class FrictionEstimator(_ChannelEstimator):
         return x
 
     def _extra_values(self, values: dict, valid: dict, std: np.ndarray, inputs: _Inputs, lateral_ok: bool) -> None:
-        x = self.filter.x
-        for name, i, observable in zip(FRICTIONS, range(7, 11), self.observable):
-            values[name], values[f"{name}_std"] = x[i], std[i]
-            valid[name] = bool(std[i] < MU_VALID_STD)
+        frictions, friction_stds = self.filter.x[two_track.MU], std[two_track.MU]
+        for name, mu, mu_std, observable in zip(FRICTIONS, frictions, friction_stds, self.observable):
+            values[name], values[f"{name}_std"] = mu, mu_std
+            valid[name] = bool(mu_std < MU_VALID_STD)
             valid[f"{name}_observable"] = bool(observable)
         valid["friction"] = any(valid[name] for name in FRICTIONS)
         valid["friction_observable"] = bool(self.observable.any())
