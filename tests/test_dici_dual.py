@@ -1,4 +1,4 @@
-"""The DICI-GFCKF (fused local filters) and the DCKF (interleaved state and parameter filters)."""
+"""The DICI-GFCKF (fused local filters), the DCKF (interleaved state and parameter filters) and the joint CKF."""
 import numpy as np
 import pytest
 
@@ -6,6 +6,7 @@ from canest.filters import FILTERS, Measurement, Transition
 from canest.filters.dici import DICIGeneralizedFifthDegreeCKF
 from canest.filters.dual import DoubleCubatureKalmanFilter
 from canest.filters.fusion import fuse
+from canest.filters.joint import JointCubatureKalmanFilter
 from canest.filters.sigma import GeneralizedFifthDegreeCKF
 
 A = np.array([[1.0, 0.1], [0.0, 0.95]])
@@ -93,13 +94,13 @@ def test_dckf_interleaves_parameter_update_before_state_update():
 
 def test_dckf_frozen_parameters_hold_and_their_variance_stays_bounded():
     f = DoubleCubatureKalmanFilter([2.0, 0.8], np.diag([0.1, 0.09]), parameters=1)
-    f.frozen = np.array([True])
+    f.parameters.frozen = np.array([True])
     for _ in range(500):
         f.predict(STATE_AND_GAIN, None, 0.01, np.diag([0.01, 0.001]))
         f.update(np.array([3.0, 2.0]), PRODUCT, None, np.diag([0.05, 0.05]))
     assert f.params.x[0] == pytest.approx(0.8)
     assert f.params.P[0, 0] == pytest.approx(0.09)  # grew to its cap, not beyond
-    f.frozen = np.array([False])
+    f.parameters.frozen = np.array([False])
     f.predict(STATE_AND_GAIN, None, 0.01, np.diag([0.01, 0.001]))
     f.update(np.array([3.0, 2.0]), PRODUCT, None, np.diag([0.05, 0.05]))
     assert f.params.x[0] > 1.0 and f.params.P[0, 0] < 0.09  # learning again: z/s = 1.5
@@ -116,13 +117,13 @@ def test_dckf_equals_the_kalman_filter_on_a_decoupled_linear_system():
     f = DoubleCubatureKalmanFilter(np.zeros(3), np.eye(3), parameters=1)
     x, P = np.zeros(3), np.eye(3)
     rng = np.random.default_rng(5)
-    for _ in range(40):
+    for _ in range(40):  # update first: the parameter's variance then stays below its cap (the initial 1)
         z = rng.standard_normal(2)
-        x, P = F @ x, F @ P @ F.T + Q
         K = P @ H.T @ np.linalg.inv(H @ P @ H.T + R)
         x, P = x + K @ (z - H @ x), (np.eye(3) - K @ H) @ P
-        f.predict(transition, None, 0.01, Q)
+        x, P = F @ x, F @ P @ F.T + Q
         f.update(z, measurement, None, R)
+        f.predict(transition, None, 0.01, Q)
         np.testing.assert_allclose(f.x, x, atol=1e-9)
         np.testing.assert_allclose(f.P, P, atol=1e-9)
 
@@ -131,3 +132,53 @@ def test_dckf_needs_a_parameter_block():
     with pytest.raises(ValueError, match="parameters"):
         DoubleCubatureKalmanFilter(np.zeros(3), np.eye(3), parameters=3)
 
+
+
+def coupled_linear_system():
+    """A state observed only together with a random-walk parameter (z1 = s + p), and the parameter alone (z2 = p)."""
+    F = np.array([[0.95, 0.0], [0.0, 1.0]])
+    H = np.array([[1.0, 1.0], [0.0, 1.0]])
+    return F, H, np.diag([0.02, 0.001]), np.diag([0.1, 0.5])
+
+
+def test_jckf_equals_the_kalman_filter_on_a_coupled_linear_system_where_dckf_does_not():
+    """The joint filter keeps the state-parameter cross-covariance the dual filter drops."""
+    F, H, Q, R = coupled_linear_system()
+    transition, measurement = Transition(lambda X, u, dt: X @ F.T), Measurement(lambda X, u: X @ H.T)
+    joint = JointCubatureKalmanFilter(np.zeros(2), np.eye(2), parameters=1)
+    dual = DoubleCubatureKalmanFilter(np.zeros(2), np.eye(2), parameters=1)
+    x, P = np.zeros(2), np.eye(2)
+    rng = np.random.default_rng(7)
+    for _ in range(30):  # update first: the parameter's variance then stays below its cap (the initial 1)
+        z = rng.standard_normal(2)
+        K = P @ H.T @ np.linalg.inv(H @ P @ H.T + R)
+        x, P = x + K @ (z - H @ x), (np.eye(2) - K @ H) @ P
+        x, P = F @ x, F @ P @ F.T + Q
+        for f in (joint, dual):
+            f.update(z, measurement, None, R)
+            f.predict(transition, None, 0.01, Q)
+        np.testing.assert_allclose(joint.x, x, atol=1e-9)
+        np.testing.assert_allclose(joint.P, P, atol=1e-9)
+    assert abs(P[0, 1]) > 0.01 and dual.P[0, 1] == 0.0
+    assert not np.allclose(dual.x, x, atol=1e-3)
+
+
+def test_jckf_frozen_parameters_hold_their_variance_is_capped_and_bounds_clip():
+    f = JointCubatureKalmanFilter([2.0, 0.8], np.diag([0.1, 0.09]), parameters=1, parameter_bounds=(0.1, 1.3))
+    f.parameters.frozen = np.array([True])
+    for _ in range(500):
+        f.predict(STATE_AND_GAIN, None, 0.01, np.diag([0.01, 0.001]))
+        f.update(np.array([3.0, 2.0]), PRODUCT, None, np.diag([0.05, 0.05]))
+    assert f.x[1] == pytest.approx(0.8)
+    assert f.P[1, 1] == pytest.approx(0.09)
+    assert np.all(np.linalg.eigvalsh(f.P) > 0)
+    f.parameters.frozen = np.array([False])
+    for _ in range(200):
+        f.predict(STATE_AND_GAIN, None, 0.01, np.diag([0.01, 0.001]))
+        f.update(np.array([6.0, 2.0]), PRODUCT, None, np.diag([0.05, 0.05]))  # z/s = 3: beyond the bound
+    assert f.x[1] == pytest.approx(1.3)
+
+
+def test_jckf_needs_a_parameter_block():
+    with pytest.raises(ValueError, match="parameters"):
+        JointCubatureKalmanFilter(np.zeros(3), np.eye(3), parameters=0)

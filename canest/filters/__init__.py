@@ -10,6 +10,7 @@ from canest.filters.base import Measurement, Transition
 from canest.filters.dici import DICIGeneralizedFifthDegreeCKF
 from canest.filters.dual import DoubleCubatureKalmanFilter
 from canest.filters.ekf import DualExtendedKalmanFilter, ExtendedKalmanFilter
+from canest.filters.joint import JointCubatureKalmanFilter
 from canest.filters.robust import MaximumCorrentropySCKF
 from canest.filters.sigma import (
     FACTORIZATIONS,
@@ -33,6 +34,7 @@ FILTERS = {cls.name: cls for cls in (
     GeneralizedFifthDegreeCKF,
     DICIGeneralizedFifthDegreeCKF,
     DoubleCubatureKalmanFilter,
+    JointCubatureKalmanFilter,
 )}
 
 __all__ = ["FILTERS", "FACTORIZATIONS", "Measurement", "Transition"]

@@ -31,21 +31,15 @@ parameters both innovations are equal. Eqs 36 and 44 print
 34 use the raw second moment minus the mean's outer product, computed here in
 the centered form (the same value without cancellation).
 
-After step 3 the parameters are clipped to ``parameter_bounds`` (the
-projection of the mean onto the physical range, e.g. friction 0.1-1.3).
-
-Parameters the estimator marks in ``frozen`` (not observable this tick) get
-a zero gain in step 3: they keep their value, and the Joseph update keeps
-their covariance honest. Their variance grows with ``Q_p`` but never beyond
-its initial value (``P0``): each time update rescales the row and column of a
-frozen parameter whose variance exceeds it (a congruence ``D P D`` with
-positive diagonal D keeps P positive definite).
+Bounds (after step 3), freezing (a zero gain in step 3) and the variance cap
+(after step 1) of the parameters: :class:`canest.filters.parameters.ParameterBlock`.
 """
 from __future__ import annotations
 
 import numpy as np
 
 from canest.filters.base import GaussianFilter, Measurement, Transition
+from canest.filters.parameters import ParameterBlock
 from canest.filters.sigma import CubatureKalmanFilter
 
 IDENTITY = Transition(lambda X, u, dt: X)
@@ -56,17 +50,13 @@ class DoubleCubatureKalmanFilter(GaussianFilter):
 
     def __init__(self, x0, P0, factorization: str = "svd", parameters: int = 4, parameter_bounds=(-np.inf, np.inf)):
         super().__init__(x0, P0)
-        n = self.x.size
-        if not 0 < parameters < n:
-            raise ValueError(f"parameters must be between 1 and {n - 1} (the state has {n} entries), got {parameters}")
-        self.split = n - parameters
-        s, p = slice(0, self.split), slice(self.split, n)
+        self.parameters = ParameterBlock(self.x.size, self.P, parameters, parameter_bounds)
+        p = self.parameters.index
+        self.split = p.start
+        s = slice(0, self.split)
         self.blocks = (s, p)
         self.states = CubatureKalmanFilter(self.x[s], self.P[s, s], factorization)
         self.params = CubatureKalmanFilter(self.x[p], self.P[p, p], factorization)
-        self.variance_cap = np.diag(self.P)[p].copy()
-        self.frozen = np.zeros(parameters, dtype=bool)
-        self.bounds = tuple(float(b) for b in parameter_bounds)
 
     def _join(self) -> None:
         s, p = self.blocks
@@ -81,16 +71,10 @@ class DoubleCubatureKalmanFilter(GaussianFilter):
     def _with_states(self, Xp):
         return np.hstack([np.broadcast_to(self.states.x, (Xp.shape[0], self.split)), Xp])
 
-    def _cap_variance(self) -> None:
-        """Rescale the rows and columns of frozen parameters whose variance exceeds its initial value."""
-        ratio = self.variance_cap / np.maximum(np.diag(self.params.P), 1e-300)
-        scale = np.sqrt(np.where(self.frozen, np.minimum(1.0, ratio), 1.0))
-        self.params.P = self.params.P * np.outer(scale, scale)
-
     def predict(self, transition: Transition, u, dt: float, Q: np.ndarray) -> None:
         s, p = self.blocks
         self.params.predict(IDENTITY, u, dt, Q[p, p])  # step 1
-        self._cap_variance()
+        self.params.P = self.parameters.cap_variance(self.params.P)
         state_transition = Transition(lambda Xs, u_, dt_: transition.f(self._with_params(Xs), u_, dt_)[:, s])
         self.states.predict(state_transition, u, dt, Q[s, s])  # step 2
         self._join()
@@ -101,8 +85,8 @@ class DoubleCubatureKalmanFilter(GaussianFilter):
         params_view = Measurement(lambda Xp, u_: measurement.h(self._with_states(Xp), u_))
         _, Pzz, Pxz = self.params.predicted_measurement(params_view, u)  # step 3
         at_mean = params_view.h(self.params.x[None, :], u)[0]
-        self.params.correct(z - at_mean, Pzz, Pxz, R + state_spread, gain_mask=~self.frozen)
-        self.params.x = np.clip(self.params.x, *self.bounds)
+        self.params.correct(z - at_mean, Pzz, Pxz, R + state_spread, gain_mask=~self.parameters.frozen)
+        self.params.x = self.parameters.clip(self.params.x)
         self.states.update(z, states_view, u, R)  # step 4
         self.y, self.S, self.K, self.nis = self.states.y, self.states.S, self.states.K, self.states.nis
         self._join()
