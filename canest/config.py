@@ -82,8 +82,8 @@ class MessageChecks:
 
 # Models and the filters they need: the dual filter estimates the two-track model's friction
 # parameters and nothing else does; the DICI-GFCKF fuses the tire-force model's two IMUs.
-MODEL_FILTERS = {"two_track": ("dckf",)}
-FILTER_MODELS = {"dckf": "two_track", "dici-gfckf": "tire_force"}
+MODEL_FILTERS = {"two_track": ("jckf", "dckf")}
+FILTER_MODELS = {"jckf": "two_track", "dckf": "two_track", "dici-gfckf": "tire_force"}
 MODEL_INPUTS = {"tire_force": sig.INPUT_GROUPS["motor_torques"], "two_track": sig.INPUT_GROUPS["motor_torques"]}
 FILTER_INPUTS = {"dici-gfckf": sig.INPUT_GROUPS["imu_2"]}
 
@@ -105,7 +105,7 @@ class EstimatorConfig:
         "yaw_rate": 0.05, "beta": 0.01, "vx": 0.3, "lateral_force": 3000.0, "wheel_speed": 5.0, "friction": 0.1})
     measurement_noise: dict = field(default_factory=lambda: {
         "ay": 0.15, "yaw_rate": 0.005, "vx_wheel": 0.15, "ax": 0.15, "ax_2": 0.3, "ay_2": 0.3, "yaw_rate_2": 0.01,
-        "wheel_speed": 0.1})
+        "wheel_speed": 0.1, "yaw_acceleration": 0.1, "vx_reference": 0.05})
     initial_std: dict = field(default_factory=lambda: {
         "yaw_rate": 0.05, "beta": 0.05, "vx": 2.0, "lateral_force": 1000.0, "wheel_speed": 1.0, "friction": 0.3})
 

@@ -123,7 +123,7 @@ def test_models_and_filters_must_fit(tmp_path):
     assert re.search(r":\d+: estimator\.model: filter 'dckf' and model 'single_track' do not fit: use model 'two_track'",
                      error_of(path))
     path = write_variant(tmp_path, lambda d: d["estimator"].update(filter="ckf", model="two_track"))
-    assert "use filter 'dckf'" in error_of(path)
+    assert "use filter 'jckf'" in error_of(path)
     path = write_variant(tmp_path, lambda d: d["estimator"].update(filter="gfckf", model="tire_force"))
     assert load_config(path).estimator.model == "tire_force"  # the paper's comparison: any sigma-point filter
     path = write_variant(tmp_path, lambda d: d["estimator"].update(filter="dici-gfckf"))

@@ -9,8 +9,11 @@ import pytest
 
 from canest.compare import with_filter
 from canest.evaluate import read_table
+from canest.models import two_track
+from canest.pipeline import Pipeline
 from canest.replay import replay
 from canest.signals import WHEELS
+from canest.sim.simulate import simulate
 
 
 def run(config, log, tmp_path, name):
@@ -46,9 +49,10 @@ def test_lateral_forces_in_csv_and_on_can_match_the_truth(config, dlc_run, tmp_p
     assert str(status[-1]["FilterId"]) == name and status[-1]["ValidFlags"] & 0b10000  # forces bit
 
 
-def test_friction_on_can_with_observability_flags(config, dlc_run, tmp_path):
+@pytest.mark.parametrize("name", ["jckf", "dckf"])
+def test_friction_on_can_with_observability_flags(config, dlc_run, tmp_path, name):
     log, _, _ = dlc_run
-    table, out_log, _ = run(config, log, tmp_path, "dckf")
+    table, out_log, _ = run(config, log, tmp_path, name)
     frames = decoded(config, out_log, "CE_Friction")
     assert len(frames) > 500
     observable = np.array([[f[f"Mu{w.upper()}Observable"] for w in WHEELS] for f in frames])
@@ -57,6 +61,38 @@ def test_friction_on_can_with_observability_flags(config, dlc_run, tmp_path):
     for w in WHEELS:
         assert np.all(np.isfinite(table[f"mu_{w}"][table["t"] > 0.5]))
         assert np.all(table[f"mu_{w}_std"][table["t"] > 0.5] <= 0.3 + 1e-9)  # never above the prior's std
+
+
+@pytest.fixture(scope="module")
+def low_friction_sine(config, tmp_path_factory):
+    """A 50 km/h sine steer on friction 0.35: the tires saturate from ~1.5 s on."""
+    folder = tmp_path_factory.mktemp("sine35")
+    sim = simulate(config, "sine", 50.0, 0.35, seed=2)
+    sim.write_log(folder / "drive.log")
+    return folder / "drive.log", sim
+
+
+def test_low_friction_is_detected_and_flagged_valid(config, low_friction_sine, tmp_path):
+    """The joint filter finds friction 0.35 from its prior 0.90 within the first saturated half-wave."""
+    log, sim = low_friction_sine
+    table, out_log, _ = run(config, log, tmp_path, "jckf")
+    late = table["t"] > 4.0
+    for w in WHEELS:
+        assert np.all(np.abs(table[f"mu_{w}"][late] - 0.35) < 0.15), w
+        assert np.sqrt(np.mean((table[f"mu_{w}"][late] - 0.35) ** 2)) < 0.1, w
+    frames = decoded(config, out_log, "CE_Friction")
+    assert all(f["MuFLValid"] and f["MuRRValid"] for f in frames[-100:])
+
+
+def test_a_divergence_reset_keeps_the_friction(config, low_friction_sine):
+    log, sim = low_friction_sine
+    pipeline = Pipeline(with_filter(config, "jckf"))
+    estimates = [e for frame in sim.frames for e in pipeline.feed(frame)]
+    learned = pipeline.estimator.filter.x[two_track.MU].copy()
+    assert np.all(learned < 0.5)  # the test's premise: far from the 0.90 prior
+    pipeline.estimator.reset()
+    pipeline.estimator.step(estimates[-1].t + 0.01)
+    np.testing.assert_allclose(pipeline.estimator.filter.x[two_track.MU], learned)
 
 
 def test_dici_keeps_estimating_yaw_rate_when_the_first_imu_goes_silent(config, dlc_run, tmp_path):

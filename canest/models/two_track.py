@@ -31,7 +31,7 @@ from canest.models.tire import TireModelParams, friction_circle, magic_formula, 
 from canest.models.wheels import MIN_WHEEL_SPEED, WheelGeometry
 
 STATE_NAMES = ("yaw_rate", "beta", "vx", "w_fl", "w_fr", "w_rl", "w_rr", "mu_fl", "mu_fr", "mu_rl", "mu_rr")
-MEASUREMENT_NAMES = ("ax", "ay", "yaw_rate", "wheel_speed_fl", "wheel_speed_fr", "wheel_speed_rl", "wheel_speed_rr")
+MEASUREMENT_NAMES = ("ax", "ay", "yaw_rate", "yaw_acceleration", "vx_reference", "wheel_speed_fl", "wheel_speed_fr", "wheel_speed_rl", "wheel_speed_rr")
 YAW, BETA, VX = 0, 1, 2
 W = slice(3, 7)
 MU = slice(7, 11)
@@ -90,8 +90,8 @@ class TwoTrackModel:
 
     def measure(self, X: np.ndarray, u: np.ndarray) -> np.ndarray:
         fx, fy, _, _ = self.forces(X, u)
-        ax, ay, _ = self.wheels.body_accelerations(fx, fy, u[DELTA])
-        return np.column_stack([ax, ay, X[:, YAW], X[:, W]])
+        ax, ay, yaw_acc = self.wheels.body_accelerations(fx, fy, u[DELTA])
+        return np.column_stack([ax, ay, X[:, YAW], yaw_acc, X[:, VX], X[:, W]])
 
     def friction_sensitivity(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:
         """|d|F_ij| / d mu_ij| per wheel (N per unit friction) at the state x: how much a tire says about its mu.
