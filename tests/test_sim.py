@@ -1,7 +1,8 @@
-"""The simulator's launch maneuver: longitudinal excitation bounded by traction control."""
+"""The simulator's launch maneuver (longitudinal excitation bounded by traction control) and friction jump."""
 import numpy as np
 import pytest
 
+from canest.commands.simulate import parse_mu_jump
 from canest.signals import WHEELS
 from canest.sim.maneuvers import Driver
 from canest.sim.simulate import simulate
@@ -18,3 +19,18 @@ def test_launch_reaches_the_tire_limit_only_on_low_friction(config, mu):
     else:  # below the road's limit: traction control never acts
         assert slip.max() < Driver.TRACTION_SLIP and usage.max() < 0.95
     assert np.all(np.abs(truth["yaw_rate"]) < 1e-3)  # straight
+
+
+def test_friction_jump_changes_the_road_at_its_time(config):
+    truth = simulate(config, "sine", 60.0, 0.85, duration=3.0, mu_jump=(1.5, [0.85, 0.3, 0.85, 0.3])).truth
+    before, after = truth["t"] < 1.5, truth["t"] >= 1.5
+    assert np.all(truth["mu_fl"] == 0.85) and np.all(truth["mu_fr"][before] == 0.85)
+    assert np.all(truth["mu_fr"][after] == 0.3) and np.all(truth["mu_rr"][after] == 0.3)
+
+
+def test_friction_jump_option_is_checked():
+    with pytest.raises(ValueError, match="--mu-jump: expected T:MU"):
+        parse_mu_jump("six:0.3")
+    with pytest.raises(ValueError, match="--mu: expected one or four values"):
+        parse_mu_jump("6:2.5")
+    assert parse_mu_jump("6:0.35") == (6.0, 0.35)

@@ -13,6 +13,7 @@ EPILOG = """examples:
   canest simulate --maneuver dlc --speed 80 --mu 0.85 --out drive.log --truth truth.csv
   canest simulate --maneuver sine --speed 80 --mu 0.35 --out sine.blf --truth sine.csv --outliers 0.02
   canest simulate --maneuver step --mu 0.85,0.85,0.3,0.3 --out split.log --truth split.csv
+  canest simulate --maneuver sine --speed 60 --mu 0.85 --mu-jump 6:0.35 --out jump.log --truth jump.csv
 
 The log is encoded through the config's input DBC and signal map, each message
 at its DBC cycle time; its format follows the suffix (.log candump, .asc,
@@ -30,6 +31,8 @@ def register(subparsers) -> None:
                         "launch: straight acceleration ramp with traction control (default dlc)")
     p.add_argument("--speed", type=float, default=80.0, help="target speed in km/h (default 80)")
     p.add_argument("--mu", default="0.85", help="road friction, one value or four (fl,fr,rl,rr) (default 0.85)")
+    p.add_argument("--mu-jump", metavar="T:MU",
+                   help="the friction changes to MU (one value or four) at T s, e.g. 6:0.35 (default: no change)")
     p.add_argument("--duration", type=float, help="seconds to simulate (default: per maneuver)")
     p.add_argument("--amplitude", type=float,
                    help="steering wheel amplitude in deg for sine/step (default 60/45); peak acceleration demand "
@@ -54,14 +57,29 @@ def parse_mu(text: str):
     return values[0] if len(values) == 1 else values
 
 
+def parse_mu_jump(text):
+    """``T:MU`` -> (T, mu); None stays None."""
+    if text is None:
+        return None
+    when, _, mu = text.partition(":")
+    try:
+        jump_time = float(when)
+    except ValueError:
+        raise ValueError(f"--mu-jump: expected T:MU with T in seconds, e.g. 6:0.35, got '{text}'") from None
+    if not mu or jump_time < 0:
+        raise ValueError(f"--mu-jump: expected T:MU with T >= 0 s, e.g. 6:0.35, got '{text}'")
+    return jump_time, parse_mu(mu)
+
+
 def run(args) -> int:
     config = config_from_args(args)
     mu = parse_mu(args.mu)
+    mu_jump = parse_mu_jump(args.mu_jump)
     with tqdm(total=100, desc=f"simulate {args.maneuver}", unit="%", leave=False, disable=not sys.stderr.isatty()) as bar:
         result = simulate(config, args.maneuver, args.speed, mu, duration=args.duration, amplitude_deg=args.amplitude,
                           seed=args.seed, noise_scale=args.noise_scale, outliers=args.outliers,
                           start_time=args.start_time, channel=config.input_bus.channel,
-                          progress=lambda f: bar.update(round(100 * f) - bar.n))
+                          progress=lambda f: bar.update(round(100 * f) - bar.n), mu_jump=mu_jump)
     result.write_log(args.out)
     result.write_truth(args.truth)
     duration = result.truth["t"][-1] - result.truth["t"][0]

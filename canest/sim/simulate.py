@@ -62,8 +62,11 @@ def _true_inputs(state, outputs, swa, torque) -> dict:
 
 def simulate(config: Config, maneuver: str, speed_kmh: float, mu, *, duration=None, amplitude_deg=None,
              seed: int = 0, noise_scale: float = 1.0, outliers: float = 0.0, start_time: float = 0.0,
-             channel: str = "vcan0", progress=None) -> Simulation:
-    """Simulate one run; ``mu`` is a scalar or four per-wheel friction coefficients."""
+             channel: str = "vcan0", progress=None, mu_jump=None) -> Simulation:
+    """Simulate one run; ``mu`` is a scalar or four per-wheel friction coefficients.
+
+    ``mu_jump = (t, mu)``: the road's friction changes to ``mu`` (scalar or four) at ``t`` s into the run.
+    """
     rng = np.random.default_rng(seed)
     speed = speed_kmh / 3.6
     plan = make_maneuver(maneuver, speed, amplitude_deg, duration)
@@ -83,6 +86,8 @@ def simulate(config: Config, maneuver: str, speed_kmh: float, mu, *, duration=No
     swa, torque = 0.0, np.zeros(4)
     for k in range(steps + 1):
         t = k * PLANT_DT
+        if mu_jump is not None and k == int(round(mu_jump[0] / PLANT_DT)):
+            plant.mu[:] = mu_jump[1]
         if k % control_every == 0:
             swa = driver.steering_wheel_angle(t, state[X], state[Y], state[PSI], state[VX], CONTROL_DT)
             torque = driver.motor_torques(t, state[VX], state[W], CONTROL_DT)
