@@ -98,7 +98,7 @@ class EstimatorConfig:
     min_speed: float = 3.0
     speed_hysteresis: float = 1.0
     timeout_cycles: float = 5.0
-    friction_excitation: float = 1500.0  # N per unit mu: |dF/dmu| above which a wheel's friction is observable
+    friction_excitation: float = 1500.0  # N per unit mu: |dF/dmu| at mu - 3 std that makes a wheel excited
     friction_correlation: float = 0.9  # prior correlation of the four wheels' frictions (same road)
     latency_compensation: bool = False
     process_noise: dict = field(default_factory=lambda: {
