@@ -11,6 +11,7 @@ from canest.replay import play_messages, replay
 from canest.service import Service
 
 IDLE_TICKS = 30
+STARVED_TICKS = 5
 
 
 def test_live_service_matches_offline_replay(config, dlc_run, tmp_path):
@@ -45,9 +46,14 @@ def test_live_service_matches_offline_replay(config, dlc_run, tmp_path):
     assert len(live) >= n
     live_yaw = np.array([e.values["yaw_rate"] for e in live[:n]])
     offline_yaw = np.array([e.values["yaw_rate"] for e in offline[:n]])
-    started = np.isfinite(offline_yaw)
-    assert np.array_equal(started, np.isfinite(live_yaw))  # both initialize on the same tick
-    # Timing jitter moves a frame across a tick boundary now and then: the tolerance is 0.5 deg/s.
+    # Timing jitter moves a frame across a tick boundary now and then: initialization may move by a tick,
+    # values by up to 0.5 deg/s. The player shares this process (GIL, garbage collection): a stall of it past
+    # the inputs' timeout starves the service for a tick or two (seen twice in CI), which then restarts.
+    first_live, first_offline = np.argmax(np.isfinite(live_yaw)), np.argmax(np.isfinite(offline_yaw))
+    assert abs(first_live - first_offline) <= 1
+    lost = np.isfinite(offline_yaw) & ~np.isfinite(live_yaw)
+    assert lost[first_live + 1:].sum() <= STARVED_TICKS
+    started = np.isfinite(offline_yaw) & np.isfinite(live_yaw)
     difference = live_yaw[started] - offline_yaw[started]
     assert np.max(np.abs(difference)) < np.radians(0.5)
     assert np.sqrt(np.mean(difference**2)) < np.radians(0.1)
