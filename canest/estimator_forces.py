@@ -28,6 +28,10 @@ excited this tick; ``Mu..Valid`` that the standard deviation is below
 not within ``MU_VALID_STD`` of the highest friction a road has (an estimate
 pressed against that bound says the data only bound friction from below).
 
+Friction may always fall but rises only on a wheel at its limit at the
+estimated friction (:meth:`FrictionEstimator._friction_ceiling`): below it
+the data bound friction from below only.
+
 A divergence reset restarts the states but keeps the frictions: it says the
 states were wrong, not the road.
 
@@ -226,11 +230,28 @@ class FrictionEstimator(_ChannelEstimator):
         excited = self.model.friction_sensitivity(self._plausibly_lower_friction(), u) >= self.est.friction_excitation
         self.observable = excited & lateral_ok & inputs.has(*TORQUES)
         self.filter.parameters.frozen = np.full(4, not self.observable.any())
+        self.filter.parameters.ceiling = self._friction_ceiling(u)
         if not mask.any():
             return False
         z_rows, measurement, R = self._rows(mask, z, std)
         self.filter.update(z_rows, measurement, u, R)
         return self._diverged(t)
+
+    def _friction_ceiling(self, u: np.ndarray) -> np.ndarray:
+        """Per wheel, the highest friction this update may give: unlimited at the tire's limit, else the estimate.
+
+        One-sided evidence: a tire below its limit at the estimated friction
+        says only that friction is at least what it uses; a force above what
+        the model predicts there is the model's error (its slip or cornering
+        stiffness), not friction. Read as friction it pushed the 0.85 launch to
+        the upper bound 1.3 (the plant's unloaded front tire is 11 % stiffer
+        in slip than the model's). So friction rises only on a tire at its
+        limit at the estimate (sensitivity at the estimate itself above
+        ``friction_excitation``) and can always fall (README "Tire forces and
+        road friction").
+        """
+        at_limit = self.model.friction_sensitivity(self.filter.x, u) >= self.est.friction_excitation
+        return np.where(at_limit, np.inf, self.filter.x[two_track.MU])
 
     def _plausibly_lower_friction(self) -> np.ndarray:
         """The state with each friction ``LOWER_FRICTION_STDS`` standard deviations lower (not below ice).

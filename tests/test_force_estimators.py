@@ -84,6 +84,16 @@ def test_low_friction_is_detected_and_flagged_valid(config, low_friction_sine, t
     assert all(f["MuFLValid"] and f["MuRRValid"] for f in frames[-100:])
 
 
+def test_friction_does_not_rise_on_a_tire_below_its_limit(config):
+    """The 0.85 launch uses up to ~70 % of the grip; the model's stiffer-than-modelled tire must not read as friction."""
+    sim = simulate(config, "launch", 40.0, 0.85, seed=0)
+    pipeline = Pipeline(with_filter(config, "jckf"))
+    estimates = [e for frame in sim.frames for e in pipeline.feed(frame)]
+    frictions = np.array([[e.values[f"mu_{w}"] for w in WHEELS] for e in estimates[50:]])
+    assert np.all(frictions < 1.05)  # prior 0.90 +- 0.30; without the one-sided rule it climbed to 1.3
+    assert np.all(np.abs(frictions[-1] - 0.85) < 0.15)
+
+
 def test_a_divergence_reset_keeps_the_friction(config, low_friction_sine):
     log, sim = low_friction_sine
     pipeline = Pipeline(with_filter(config, "jckf"))

@@ -5,7 +5,9 @@ Shared by the double CKF (:mod:`canest.filters.dual`) and the joint CKF
 the state as random-walk parameters:
 
 * after each measurement update the parameters are clipped to ``bounds``
-  (the projection of the mean onto the physical range, e.g. friction 0.1-1.3);
+  (the projection of the mean onto the physical range, e.g. friction 0.1-1.3)
+  and to ``ceiling``, a per-update upper limit the estimator may set (where
+  the data can only bound a parameter from below: :mod:`canest.estimator_forces`);
 * parameters in ``frozen`` (set by the estimator: not observable this tick)
   get a zero gain, so they keep their value; the Joseph update keeps the
   covariance honest for any gain;
@@ -27,9 +29,11 @@ class ParameterBlock:
         self.bounds = tuple(float(b) for b in bounds)
         self.variance_cap = np.diag(P0)[self.index].copy()
         self.frozen = np.zeros(count, dtype=bool)
+        self.ceiling = np.full(count, np.inf)
 
     def clip(self, values: np.ndarray) -> np.ndarray:
-        return np.clip(values, *self.bounds)
+        low, high = self.bounds
+        return np.clip(values, low, np.maximum(np.minimum(self.ceiling, high), low))
 
     def gain_mask(self, size: int) -> np.ndarray:
         """Which of ``size`` trailing-aligned state entries may move: all but the frozen parameters."""
