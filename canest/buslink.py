@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import errno
 import logging
-import socket
 import time
 
 import can
@@ -24,8 +23,6 @@ log = logging.getLogger("canest.bus")
 BACKOFF_START = 0.1  # s
 BACKOFF_MAX = 5.0  # s
 DROP_ONLY = {errno.ENOBUFS, errno.ENETDOWN, errno.EAGAIN}
-RECEIVE_BUFFER = 4 * 1024 * 1024  # bytes, ~5000 frames
-SO_RCVBUFFORCE = getattr(socket, "SO_RCVBUFFORCE", 33)  # Linux
 GONE = {errno.ENODEV, errno.ENXIO, errno.EBADF, errno.ENOTCONN}  # the socket is useless: reopen
 
 
@@ -39,33 +36,9 @@ class BusOpenError(RuntimeError):
 
 def open_bus(kwargs: dict, role: str, **extra) -> can.BusABC:
     try:
-        bus = can.Bus(**kwargs, **extra)
+        return can.Bus(**kwargs, **extra)
     except (can.CanError, OSError, ValueError, ImportError) as exc:
         raise BusOpenError(f"cannot open {role} bus {kwargs.get('interface')}:{kwargs.get('channel')}: {exc}") from None
-    _enlarge_receive_buffer(bus)
-    return bus
-
-
-def _enlarge_receive_buffer(bus) -> None:
-    """Give a SocketCAN socket ``RECEIVE_BUFFER`` bytes of receive queue.
-
-    The kernel's default (``net.core.rmem_default``, 208 KiB) holds about 250
-    frames (each costs ~850 bytes of socket memory): a 250 ms stall of the
-    daemon at 1000 frames/s overflows it and frames are lost silently (seen in
-    the UML guest under 1500 frames/s). ``SO_RCVBUFFORCE`` needs
-    CAP_NET_ADMIN; without it ``SO_RCVBUF`` is clamped to ``net.core.rmem_max``
-    (raise it with sysctl for a bigger queue; README "Deployment").
-    """
-    sock = getattr(bus, "socket", None)
-    if not isinstance(sock, socket.socket):
-        return
-    for option in (SO_RCVBUFFORCE, socket.SO_RCVBUF):
-        try:
-            sock.setsockopt(socket.SOL_SOCKET, option, RECEIVE_BUFFER)
-            break
-        except OSError:
-            continue
-    log.debug("receive buffer %d bytes", sock.getsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF))
 
 
 class BusLink:

@@ -77,6 +77,7 @@ class Player(threading.Thread):
         self.sent = 0
         self.failed = 0
         self.start_time = None
+        self.duration = frames[-1].timestamp - frames[0].timestamp + 0.01  # one pass, s of log time
 
     def _bus(self):
         try:
@@ -88,7 +89,7 @@ class Player(threading.Thread):
         bus = self._bus()
         self.start_time = time.perf_counter()
         t_first = self.frames[0].timestamp
-        duration = self.frames[-1].timestamp - t_first + 0.01
+        duration = self.duration
         for loop in range(self.loops):
             for frame in self.frames:
                 if self.done.is_set():
