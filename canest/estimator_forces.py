@@ -260,8 +260,8 @@ class FrictionEstimator(_ChannelEstimator):
         a friction the estimate still allows. Testing at the estimate itself
         never opens the gate for an overestimated friction (measured: at 1
         standard deviation three of the joint filter's four estimates never left
-        0.90 on the 50 km/h sine on friction 0.35; at 3 it converges within 0.4-0.9 s and holds 0.83-0.85
-        on friction 0.85; README "Tire forces and road friction").
+        0.90 on the 50 km/h sine on friction 0.35; at 3 they are within 0.1
+        after 0.3-0.8 s; README "Tire forces and road friction").
         """
         x = self.filter.x.copy()
         std = np.sqrt(np.maximum(np.diag(self.filter.P)[two_track.MU], 0.0))
