@@ -227,17 +227,18 @@ class FrictionEstimator(_ChannelEstimator):
 
     def _update(self, inputs: _Inputs, u: np.ndarray, lateral_ok: bool, t: float) -> bool:
         mask, z, std = self._channels(inputs, t, lateral_ok)
-        excited = self.model.friction_sensitivity(self._plausibly_lower_friction(), u) >= self.est.friction_excitation
+        states = np.stack([self._plausibly_lower_friction(), self.filter.x])
+        excited, at_limit = self.model.friction_sensitivity(states, u) >= self.est.friction_excitation
         self.observable = excited & lateral_ok & inputs.has(*TORQUES)
         self.filter.parameters.frozen = np.full(4, not self.observable.any())
-        self.filter.parameters.ceiling = self._friction_ceiling(u)
+        self.filter.parameters.ceiling = self._friction_ceiling(at_limit)
         if not mask.any():
             return False
         z_rows, measurement, R = self._rows(mask, z, std)
         self.filter.update(z_rows, measurement, u, R)
         return self._diverged(t)
 
-    def _friction_ceiling(self, u: np.ndarray) -> np.ndarray:
+    def _friction_ceiling(self, at_limit: np.ndarray) -> np.ndarray:
         """Per wheel, the highest friction this update may give: unlimited at the tire's limit, else the estimate.
 
         One-sided evidence: a tire below its limit at the estimated friction
@@ -250,7 +251,6 @@ class FrictionEstimator(_ChannelEstimator):
         ``friction_excitation``) and can always fall (README "Tire forces and
         road friction").
         """
-        at_limit = self.model.friction_sensitivity(self.filter.x, u) >= self.est.friction_excitation
         return np.where(at_limit, np.inf, self.filter.x[two_track.MU])
 
     def _plausibly_lower_friction(self) -> np.ndarray:

@@ -106,6 +106,13 @@ def test_dckf_frozen_parameters_hold_and_their_variance_stays_bounded():
     assert f.params.x[0] > 1.0 and f.params.P[0, 0] < 0.09  # learning again: z/s = 1.5
 
 
+def kalman_update_then_predict(x, P, z, F, H, Q, R):
+    """The linear Kalman filter, update first: a parameter's variance then stays below its cap (the initial 1)."""
+    K = P @ H.T @ np.linalg.inv(H @ P @ H.T + R)
+    x, P = x + K @ (z - H @ x), (np.eye(len(x)) - K @ H) @ P
+    return F @ x, F @ P @ F.T + Q
+
+
 def test_dckf_equals_the_kalman_filter_on_a_decoupled_linear_system():
     """States and parameters that do not interact: the dual filter's block-diagonal covariance is exact."""
     F = np.diag([0.98, 1.0, 1.0])  # two states (one observed), one random-walk parameter
@@ -117,11 +124,9 @@ def test_dckf_equals_the_kalman_filter_on_a_decoupled_linear_system():
     f = DoubleCubatureKalmanFilter(np.zeros(3), np.eye(3), parameters=1)
     x, P = np.zeros(3), np.eye(3)
     rng = np.random.default_rng(5)
-    for _ in range(40):  # update first: the parameter's variance then stays below its cap (the initial 1)
+    for _ in range(40):
         z = rng.standard_normal(2)
-        K = P @ H.T @ np.linalg.inv(H @ P @ H.T + R)
-        x, P = x + K @ (z - H @ x), (np.eye(3) - K @ H) @ P
-        x, P = F @ x, F @ P @ F.T + Q
+        x, P = kalman_update_then_predict(x, P, z, F, H, Q, R)
         f.update(z, measurement, None, R)
         f.predict(transition, None, 0.01, Q)
         np.testing.assert_allclose(f.x, x, atol=1e-9)
@@ -133,27 +138,21 @@ def test_dckf_needs_a_parameter_block():
         DoubleCubatureKalmanFilter(np.zeros(3), np.eye(3), parameters=3)
 
 
-
-def coupled_linear_system():
-    """A state observed only together with a random-walk parameter (z1 = s + p), and the parameter alone (z2 = p)."""
-    F = np.array([[0.95, 0.0], [0.0, 1.0]])
-    H = np.array([[1.0, 1.0], [0.0, 1.0]])
-    return F, H, np.diag([0.02, 0.001]), np.diag([0.1, 0.5])
-
-
 def test_jckf_equals_the_kalman_filter_on_a_coupled_linear_system_where_dckf_does_not():
-    """The joint filter keeps the state-parameter cross-covariance the dual filter drops."""
-    F, H, Q, R = coupled_linear_system()
+    """The joint filter keeps the state-parameter cross-covariance the dual filter drops.
+
+    A state observed only together with a random-walk parameter (z1 = s + p), and the parameter alone (z2 = p).
+    """
+    F, H = np.array([[0.95, 0.0], [0.0, 1.0]]), np.array([[1.0, 1.0], [0.0, 1.0]])
+    Q, R = np.diag([0.02, 0.001]), np.diag([0.1, 0.5])
     transition, measurement = Transition(lambda X, u, dt: X @ F.T), Measurement(lambda X, u: X @ H.T)
     joint = JointCubatureKalmanFilter(np.zeros(2), np.eye(2), parameters=1)
     dual = DoubleCubatureKalmanFilter(np.zeros(2), np.eye(2), parameters=1)
     x, P = np.zeros(2), np.eye(2)
     rng = np.random.default_rng(7)
-    for _ in range(30):  # update first: the parameter's variance then stays below its cap (the initial 1)
+    for _ in range(30):
         z = rng.standard_normal(2)
-        K = P @ H.T @ np.linalg.inv(H @ P @ H.T + R)
-        x, P = x + K @ (z - H @ x), (np.eye(2) - K @ H) @ P
-        x, P = F @ x, F @ P @ F.T + Q
+        x, P = kalman_update_then_predict(x, P, z, F, H, Q, R)
         for f in (joint, dual):
             f.update(z, measurement, None, R)
             f.predict(transition, None, 0.01, Q)

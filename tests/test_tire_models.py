@@ -127,6 +127,7 @@ def test_two_track_model_left_turn_drive_and_stiff_wheels(config):
     sensitivity = model.friction_sensitivity(X[0], u)
     straight = model.friction_sensitivity(x0[0], np.array([0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]))
     assert np.all(sensitivity > straight)
+    np.testing.assert_allclose(model.friction_sensitivity(np.stack([X[0], x0[0]]), u)[0], sensitivity)  # batched
 
 
 def test_tire_defaults_differ_from_the_plant():

@@ -99,11 +99,13 @@ class TwoTrackModel:
         Near zero while the tire works in its linear range (the force does not
         depend on the peak), growing as it approaches the friction limit.
         Central difference; each wheel's force depends only on its own mu, so
-        all four are perturbed at once.
+        all four are perturbed at once. ``x`` of shape (n,) gives (4,); states
+        of shape (k, n) give (k, 4) from one model evaluation.
         """
-        X = np.repeat(x[None, :], 2, axis=0)
-        X[0, MU] += SENSITIVITY_STEP
-        X[1, MU] -= SENSITIVITY_STEP
+        X = np.repeat(np.atleast_2d(x), 2, axis=0)
+        X[0::2, MU] += SENSITIVITY_STEP
+        X[1::2, MU] -= SENSITIVITY_STEP
         fx, fy, _, _ = self.forces(X, u)
         magnitude = np.hypot(fx, fy)
-        return np.abs(magnitude[0] - magnitude[1]) / (2.0 * SENSITIVITY_STEP)
+        sensitivity = np.abs(magnitude[0::2] - magnitude[1::2]) / (2.0 * SENSITIVITY_STEP)
+        return sensitivity if np.ndim(x) == 2 else sensitivity[0]
