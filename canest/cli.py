@@ -7,8 +7,7 @@ import sys
 
 from canest import __version__
 from canest.commands import batch, check, compare, demo, evaluate, monitor, replay, run, simulate
-from canest.config import ConfigError
-from canest.buslink import BusOpenError
+from canest.errors import CanestError
 
 DESCRIPTION = """canest: online vehicle state estimation on CAN.
 
@@ -38,7 +37,7 @@ def main(argv=None) -> None:
     args = build_parser().parse_args(argv)
     try:
         sys.exit(args.func(args))
-    except (ConfigError, BusOpenError, FileNotFoundError, ValueError) as exc:
+    except CanestError as exc:  # a problem of the input: one line; anything else is a bug and keeps its traceback
         print(f"canest: error: {exc}", file=sys.stderr)
         sys.exit(2)
     except KeyboardInterrupt:

@@ -12,32 +12,19 @@ from collections import Counter
 
 import can
 
-from canest.codec import InputDecoder
-from canest.config import Config
-from canest.estimator_forces import make_estimator
-from canest.outputs import EstimateEncoder
+from canest.codec.decode import InputDecoder
+from canest.codec.encode import EstimateEncoder
+from canest.estimation.catalog import make_estimator
 from canest.resample import Resampler, TickClock
-
-DEFAULT_CYCLE_TIME = 0.1  # s, for messages whose DBC gives no GenMsgCycleTime
-MIN_TIMEOUT = 0.05  # s
-
-
-def input_timeouts(config: Config, decoder: InputDecoder) -> dict:
-    """Per canonical input: ``timeout_cycles`` times its message's cycle time."""
-    timeouts = {}
-    for plan in decoder.plans.values():
-        cycle = (plan.message.cycle_time or DEFAULT_CYCLE_TIME * 1000) / 1000.0
-        for spec in plan.specs:
-            timeouts[spec.canonical] = max(config.estimator.timeout_cycles * cycle, MIN_TIMEOUT)
-    return timeouts
+from canest.settings import Config
 
 
 class Pipeline:
     def __init__(self, config: Config, output_channel=None):
         self.config = config
         self.decoder = InputDecoder(config)
-        self.resampler = Resampler(config.signals, input_timeouts(config, self.decoder))
-        self.estimator = make_estimator(config, self.resampler)
+        self.resampler = Resampler(config.signals, self.decoder.timeouts(config.estimator.timeout_cycles))
+        self.estimator = make_estimator(config)
         self.encoder = EstimateEncoder(config.output_dbc, output_channel)
         self.clock = TickClock(1.0 / config.estimator.rate_hz)
         self.counts = Counter()
@@ -45,7 +32,7 @@ class Pipeline:
 
     def _ticks(self, t: float) -> list:
         jumps = self.clock.jumps
-        estimates = [self.estimator.step(tick) for tick in self.clock.due(t)]
+        estimates = [self.estimator.step(self.resampler.sample(tick)) for tick in self.clock.due(t)]
         if self.clock.jumps != jumps:
             self.counts["time_jumps"] += 1
             self.estimator.reset()

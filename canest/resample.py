@@ -19,6 +19,7 @@ import numpy as np
 @dataclass
 class Sample:
     t: float
+    names: tuple  # canonical input names, the order of the arrays
     values: np.ndarray
     stale: np.ndarray  # bool per input
     fresh: np.ndarray  # bool per input
@@ -43,7 +44,7 @@ class Resampler:
     def sample(self, t: float) -> Sample:
         ages = t - self.stamps
         stale = ages > self.timeouts
-        sample = Sample(t, self.values.copy(), stale, self.fresh & ~stale, ages)
+        sample = Sample(t, self.names, self.values.copy(), stale, self.fresh & ~stale, ages)
         self.fresh[:] = False
         return sample
 

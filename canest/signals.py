@@ -44,8 +44,6 @@ INPUT_GROUPS = {
     "imu_2": ("ax_2", "ay_2", "yaw_rate_2"),
 }
 
-REQUIRED = ("steering_wheel_angle", "ax", "ay", "yaw_rate", *(f"wheel_speed_{w}" for w in WHEELS))
-
 
 def si_unit(canonical: str) -> str:
     return UNITS[CANONICAL[canonical]][0]

@@ -11,9 +11,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from canest.batch import ESTIMATES, SUMMARY, run_batch
-from canest.evaluate import read_table
-from canest.replay import replay
+from canest.apps.batch import ESTIMATES, SUMMARY, run_batch
+from canest.apps.evaluate import read_table
+from canest.apps.replay import replay
 from canest.sim.simulate import simulate
 from tests.conftest import write_log_and_truth
 

@@ -4,8 +4,9 @@ import time
 
 import can
 
-from canest.config import BusConfig
-from canest.service import Service
+from canest.settings import BusConfig
+from canest.apps.service import Service
+from canest.io.sinks import CallbackSink
 
 
 def test_a_full_output_queue_drops_frames_without_blocking(config, dlc_run):
@@ -15,7 +16,7 @@ def test_a_full_output_queue_drops_frames_without_blocking(config, dlc_run):
     live_config = config.with_buses(BusConfig("virtual", "full-in"), BusConfig("virtual", "full-out"))
     stuck = can.Bus(interface="virtual", channel="full-out", rx_queue_size=5)
     ticks = []
-    service = Service(live_config, on_estimate=lambda e: ticks.append(time.monotonic()))
+    service = Service(live_config, sinks=[CallbackSink(lambda e: ticks.append(time.monotonic()))])
     player = can.Bus(interface="virtual", channel="full-in")
 
     def play():

@@ -7,7 +7,7 @@ import cantools
 import numpy as np
 import pytest
 
-from canest.evaluate import read_table
+from canest.apps.evaluate import read_table
 from tests.conftest import ROOT
 
 CANEST = [sys.executable, "-m", "canest"]

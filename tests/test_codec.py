@@ -4,8 +4,9 @@ import math
 import can
 import pytest
 
-from canest import integrity
-from canest.codec import InputDecoder, InputEncoder
+from canest.codec import integrity
+from canest.codec.decode import InputDecoder
+from canest.codec.encode import InputEncoder
 from canest.config import load_config
 from tests.conftest import ROOT
 
@@ -125,7 +126,7 @@ SIG_VALTYPE_ 256 LatAccF : 1;
     config = load_config(ROOT / "configs" / "dici_ev.yaml")
     import dataclasses
 
-    from canest.config import SignalSpec
+    from canest.settings import SignalSpec
 
     signals = {**config.signals, "yaw_rate": SignalSpec("yaw_rate", "FLOAT_IMU", "YawRateF", 1.0),
                "ay": SignalSpec("ay", "FLOAT_IMU", "LatAccF", 1.0)}

@@ -4,10 +4,10 @@ import math
 import numpy as np
 import pytest
 
-from canest.codec import InputEncoder
-from canest.evaluate import read_table, score
+from canest.codec.encode import InputEncoder
+from canest.apps.evaluate import read_table, score
 from canest.pipeline import Pipeline
-from canest.replay import replay
+from canest.apps.replay import replay
 from canest.sim.simulate import simulate
 
 

@@ -16,9 +16,9 @@ import cantools
 import numpy as np
 import pytest
 
-from canest import integrity
-from canest.evaluate import read_table
-from canest.replay import replay
+from canest.codec import integrity
+from canest.apps.evaluate import read_table
+from canest.apps.replay import replay
 from canest.signals import INPUT_GROUPS
 from tests.conftest import ROOT
 from tests.live import Capture, Daemon, Player, ip, restore_vcan

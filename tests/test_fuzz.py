@@ -3,7 +3,7 @@ import can
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from canest.codec import InputDecoder
+from canest.codec.decode import InputDecoder
 from canest.pipeline import Pipeline
 
 MAPPED = [0xB4, 0xB6, 0xC2, 0x130, 0x140, 0x1D0, 0x1D2]

@@ -1,7 +1,7 @@
 """Repeated warnings are rate limited, and the count of those suppressed is reported."""
 import logging
 
-from canest.logs import RateLimit
+from canest.apps.journal import RateLimit
 
 
 def record(message, level=logging.WARNING, name="canest.bus"):

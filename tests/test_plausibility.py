@@ -1,7 +1,7 @@
 """Slew-rate plausibility of input samples."""
 import math
 
-from canest.plausibility import RESYNC_AFTER, SlewLimit
+from canest.codec.plausibility import RESYNC_AFTER, SlewLimit
 
 
 def test_rejects_an_impossible_jump_and_keeps_the_reference():

@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from canest.reference_speed import DRIFT, MAX_GAP, ReferenceSpeed
+from canest.estimation.reference_speed import DRIFT, MAX_GAP, ReferenceSpeed
 
 RADIUS, STIFFNESS, ANCHORED_STD = 0.3, 15.0, 0.05
 ROLLING = np.zeros(4)

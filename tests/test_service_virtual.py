@@ -5,10 +5,11 @@ import time
 import can
 import numpy as np
 
-from canest.config import BusConfig
-from canest.demo import run_demo
-from canest.replay import play_messages, replay
-from canest.service import Service
+from canest.settings import BusConfig
+from canest.apps.demo import run_demo
+from canest.apps.replay import play_messages, replay
+from canest.apps.service import Service
+from canest.io.sinks import CallbackSink
 
 IDLE_TICKS = 30
 STARVED_TICKS = 5
@@ -20,7 +21,7 @@ def test_live_service_matches_offline_replay(config, dlc_run, tmp_path):
     replay(config, log, progress=False, on_estimate=offline.append)
     live_config = config.with_buses(BusConfig("virtual", "svc-in"), BusConfig("virtual", "svc-out"))
     live = []
-    service = Service(live_config, on_estimate=live.append)
+    service = Service(live_config, sinks=[CallbackSink(live.append)])
     listener = can.Bus(interface="virtual", channel="svc-out")
     player_bus = can.Bus(interface="virtual", channel="svc-in")
 
@@ -73,7 +74,7 @@ def test_idle_bus_keeps_ticking_and_reports_missing_inputs(config, dlc_run):
     _, _, sim = dlc_run
     live_config = config.with_buses(BusConfig("virtual", "idle-in"), BusConfig("virtual", "idle-out"))
     live = []
-    service = Service(live_config, on_estimate=live.append)
+    service = Service(live_config, sinks=[CallbackSink(live.append)])
     player_bus = can.Bus(interface="virtual", channel="idle-in")
     first_second = [f for f in sim.frames if f.timestamp < sim.frames[0].timestamp + 1.0]
 
@@ -117,8 +118,8 @@ def test_time_jump_and_backwards_timestamps_are_counted_not_stepped(config, dlc_
 def test_monitor_shows_estimates_and_health_of_a_running_service(config, dlc_run):
     import io
 
-    from canest.config import load_database
-    from canest.monitor import run_monitor
+    from canest.codec.dbc import load_database
+    from canest.apps.monitor import run_monitor
 
     _, _, sim = dlc_run
     live_config = config.with_buses(BusConfig("virtual", "mon-in"), BusConfig("virtual", "mon-out"))

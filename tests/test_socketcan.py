@@ -14,9 +14,9 @@ import cantools
 import numpy as np
 import pytest
 
-from canest import integrity
-from canest.evaluate import read_table, score
-from canest.replay import replay
+from canest.codec import integrity
+from canest.apps.evaluate import read_table, score
+from canest.apps.replay import replay
 from tests import live
 from tests.conftest import CONFIG, ROOT
 from tests.live import Daemon

@@ -17,7 +17,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from canest.config import DEFAULT_CONFIG, load_config  # noqa: E402
-from canest.evaluate import score  # noqa: E402
+from canest.apps.evaluate import score  # noqa: E402
 from canest.pipeline import Pipeline  # noqa: E402
 from canest.sim.simulate import simulate  # noqa: E402
 

@@ -20,7 +20,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from canest.compare import STATES, format_comparison, run_filter  # noqa: E402
+from canest.apps.compare import STATES, format_comparison, run_filter  # noqa: E402
 from canest.config import DEFAULT_CONFIG, load_config  # noqa: E402
 from canest.filters import FILTERS  # noqa: E402
 from canest.sim.simulate import simulate  # noqa: E402

@@ -27,7 +27,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from canest.compare import with_filter  # noqa: E402
+from canest.apps.compare import with_filter  # noqa: E402
 from canest.config import DEFAULT_CONFIG, load_config  # noqa: E402
 from canest.pipeline import Pipeline  # noqa: E402
 from canest.signals import WHEELS  # noqa: E402

@@ -4,9 +4,9 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
-from canest.batch import fleet_table, plot_errors, run_batch
+from canest.apps.batch import fleet_table, plot_errors, run_batch
 from canest.commands.common import FORMATTER, add_config, config_from_args
-from canest.compare import parse_filters
+from canest.apps.compare import parse_filters
 
 EPILOG = """examples:
   canest batch 'logs/**/*.log' --config configs/dici_ev.yaml --out results/

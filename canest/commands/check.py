@@ -2,9 +2,8 @@
 from __future__ import annotations
 
 from canest.commands.common import FORMATTER, add_config, config_from_args
-from canest.codec import InputDecoder
-from canest.outputs import EstimateEncoder
-from canest.pipeline import input_timeouts
+from canest.codec.decode import InputDecoder
+from canest.codec.encode import EstimateEncoder
 from canest.signals import si_unit
 
 EPILOG = """Every error names the file, the line and the key, message or signal.
@@ -22,7 +21,7 @@ def run(args) -> int:
     config = config_from_args(args)
     decoder = InputDecoder(config)
     EstimateEncoder(config.output_dbc)
-    timeouts = input_timeouts(config, decoder)
+    timeouts = decoder.timeouts(config.estimator.timeout_cycles)
     v = config.vehicle
     print(f"config   {config.path}")
     print(f"vehicle  {v.name}: m={v.mass:g} kg, Iz={v.yaw_inertia:g} kg m^2, a={v.cg_to_front:g} m, "

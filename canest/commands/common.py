@@ -3,7 +3,8 @@ from __future__ import annotations
 
 import argparse
 
-from canest.config import DEFAULT_CONFIG, BusConfig, load_config
+from canest.config import DEFAULT_CONFIG, load_config
+from canest.settings import BusConfig
 
 
 FORMATTER = argparse.RawDescriptionHelpFormatter

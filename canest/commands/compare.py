@@ -2,8 +2,8 @@
 from __future__ import annotations
 
 from canest.commands.common import FORMATTER, add_config, config_from_args
-from canest.compare import format_comparison, parse_filters, plot_comparison, run_filter
-from canest.evaluate import read_table
+from canest.apps.compare import format_comparison, parse_filters, plot_comparison, run_filter
+from canest.apps.evaluate import read_table
 
 EPILOG = """examples:
   canest simulate --maneuver dlc --speed 80 --mu 0.85 -o dlc.log --truth dlc.csv

@@ -2,11 +2,12 @@
 from __future__ import annotations
 
 import sys
+from contextlib import ExitStack
 
 from canest.commands.common import FORMATTER, add_config, config_from_args
 from canest.commands.simulate import parse_mu
-from canest.demo import run_demo
-from canest.outputs import EstimateCsvWriter
+from canest.apps.demo import run_demo
+from canest.io.sinks import CsvSink
 from canest.sim.maneuvers import MANEUVERS
 
 EPILOG = """A simulated vehicle drives the maneuver; its frames go onto a python-can
@@ -34,10 +35,8 @@ def register(subparsers) -> None:
 
 def run(args) -> int:
     config = config_from_args(args)
-    if args.csv:
-        with EstimateCsvWriter(args.csv) as writer:
-            run_demo(config, args.maneuver, args.speed, parse_mu(args.mu), args.seed, args.playback_speed,
-                     sys.stdout, writer)
-    else:
-        run_demo(config, args.maneuver, args.speed, parse_mu(args.mu), args.seed, args.playback_speed, sys.stdout)
+    with ExitStack() as stack:
+        sinks = [stack.enter_context(CsvSink(args.csv))] if args.csv else []
+        run_demo(config, args.maneuver, args.speed, parse_mu(args.mu), args.seed, args.playback_speed, sys.stdout,
+                 sinks)
     return 0

@@ -1,8 +1,9 @@
 """canest evaluate: RMSE and MAE of an estimate CSV against a truth CSV."""
 from __future__ import annotations
 
+from canest.errors import TableError
 from canest.commands.common import FORMATTER
-from canest.evaluate import DISPLAY, format_table, plot, read_table, score
+from canest.apps.evaluate import DISPLAY, format_table, plot, read_table, score
 
 EPILOG = """example:
   canest evaluate est.csv truth.csv --plot est.png
@@ -33,7 +34,7 @@ def run(args) -> int:
     for state in states:
         for table, path in ((estimate, args.estimate), (truth, args.truth)):
             if state not in table:
-                raise ValueError(f"{path}: no column '{state}'")
+                raise TableError(f"{path}: no column '{state}'")
     print(format_table(score(estimate, truth, states, only_valid=not args.all, skip=args.skip),
                        f"{args.estimate} vs {args.truth}"))
     if args.plot:

@@ -3,10 +3,11 @@ from __future__ import annotations
 
 import sys
 
-from canest.buslink import open_bus
+from canest.io.bus import open_bus
 from canest.commands.common import FORMATTER, add_config
-from canest.config import DEFAULT_CONFIG, load_config, load_database
-from canest.monitor import run_monitor
+from canest.codec.dbc import load_database
+from canest.config import DEFAULT_CONFIG, load_config
+from canest.apps.monitor import run_monitor
 
 EPILOG = """examples:
   canest monitor --channel vcan1

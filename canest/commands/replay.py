@@ -3,10 +3,11 @@ from __future__ import annotations
 
 import sys
 
-from canest.buslink import open_bus
+from canest.errors import UsageError
+from canest.io.bus import open_bus
 from canest.commands.common import FORMATTER, add_bus_overrides, add_config, config_from_args
 from canest.pipeline import format_summary
-from canest.replay import play, replay
+from canest.apps.replay import play, replay
 
 EPILOG = """examples:
   canest replay drive.log --out est.log --csv est.csv
@@ -39,7 +40,7 @@ def run(args) -> int:
     config = config_from_args(args)
     if args.realtime:
         if args.out or args.csv:
-            raise ValueError("--realtime plays the log onto a bus; --out and --csv belong to offline replay")
+            raise UsageError("--realtime plays the log onto a bus; --out and --csv belong to offline replay")
         bus = open_bus(config.input_bus.kwargs(), "playback")
         try:
             sent = play(args.log, bus, speed=args.speed, progress=not args.quiet)

@@ -2,12 +2,13 @@
 from __future__ import annotations
 
 import sys
+from contextlib import ExitStack
 
-from canest import logs
+from canest.apps import journal
 from canest.commands.common import FORMATTER, add_bus_overrides, add_config, config_from_args
-from canest.outputs import EstimateCsvWriter
+from canest.io.sinks import CsvSink
 from canest.pipeline import format_summary
-from canest.service import Service
+from canest.apps.service import Service
 
 EPILOG = """examples:
   canest run --config configs/dici_ev.yaml                 # vcan0 -> vcan1 as configured
@@ -33,14 +34,11 @@ def register(subparsers) -> None:
 
 def run(args) -> int:
     config = config_from_args(args)
-    logs.setup(args.log_level)
-    writer = EstimateCsvWriter(args.csv) if args.csv else None
-    service = Service(config, csv_writer=writer, reload_config=lambda: config_from_args(args))
-    service.install_signal_handlers()
-    try:
+    journal.setup(args.log_level)
+    with ExitStack() as stack:
+        sinks = [stack.enter_context(CsvSink(args.csv))] if args.csv else []
+        service = Service(config, sinks=sinks, reload_config=lambda: config_from_args(args))
+        service.install_signal_handlers()
         summary = service.run()
-    finally:
-        if writer:
-            writer.close()
     print(format_summary(summary), file=sys.stderr)
     return 0

@@ -5,6 +5,7 @@ import sys
 
 from tqdm import tqdm
 
+from canest.errors import UsageError
 from canest.commands.common import FORMATTER, add_config, config_from_args
 from canest.sim.maneuvers import MANEUVERS
 from canest.sim.simulate import simulate
@@ -51,9 +52,9 @@ def parse_mu(text: str):
     try:
         values = [float(v) for v in text.split(",")]
     except ValueError:
-        raise ValueError(f"--mu: expected a number or four comma-separated numbers, got '{text}'") from None
+        raise UsageError(f"--mu: expected a number or four comma-separated numbers, got '{text}'") from None
     if len(values) not in (1, 4) or not all(0.05 <= v <= 1.5 for v in values):
-        raise ValueError(f"--mu: expected one or four values in [0.05, 1.5], got '{text}'")
+        raise UsageError(f"--mu: expected one or four values in [0.05, 1.5], got '{text}'")
     return values[0] if len(values) == 1 else values
 
 
@@ -65,9 +66,9 @@ def parse_mu_jump(text):
     try:
         jump_time = float(when)
     except ValueError:
-        raise ValueError(f"--mu-jump: expected T:MU with T in seconds, e.g. 6:0.35, got '{text}'") from None
+        raise UsageError(f"--mu-jump: expected T:MU with T in seconds, e.g. 6:0.35, got '{text}'") from None
     if not mu or jump_time < 0:
-        raise ValueError(f"--mu-jump: expected T:MU with T >= 0 s, e.g. 6:0.35, got '{text}'")
+        raise UsageError(f"--mu-jump: expected T:MU with T >= 0 s, e.g. 6:0.35, got '{text}'")
     return jump_time, parse_mu(mu)
 
 
@@ -75,6 +76,8 @@ def run(args) -> int:
     config = config_from_args(args)
     mu = parse_mu(args.mu)
     mu_jump = parse_mu_jump(args.mu_jump)
+    if not 0.0 <= args.outliers < 1.0:
+        raise UsageError(f"--outliers: a probability per sample in [0, 1), got {args.outliers}")
     with tqdm(total=100, desc=f"simulate {args.maneuver}", unit="%", leave=False, disable=not sys.stderr.isatty()) as bar:
         result = simulate(config, args.maneuver, args.speed, mu, duration=args.duration, amplitude_deg=args.amplitude,
                           seed=args.seed, noise_scale=args.noise_scale, outliers=args.outliers,

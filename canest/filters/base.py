@@ -32,6 +32,21 @@ class Measurement:
     parameter_jacobian: Optional[Callable] = None  # (x, u) -> (m,): d h / d(model parameter), for dual filters
 
 
+def central_difference_jacobian(fun: Callable, x: np.ndarray, relative_step: float = 1e-6) -> np.ndarray:
+    """``d fun / d x`` at ``x`` by central differences, all 2n points in one vectorized call.
+
+    The fallback for models without an analytic Jacobian, so the linearizing
+    filters run on every model. Step ``relative_step * max(1, |x_i|)``: second
+    order, error ``O(h^2)`` (the states span rad/s to kN).
+    """
+    x = np.asarray(x, dtype=float)
+    steps = relative_step * np.maximum(1.0, np.abs(x))
+    offsets = np.diag(steps)
+    values = fun(np.vstack([x + offsets, x - offsets]))
+    n = x.size
+    return ((values[:n] - values[n:]) / (2.0 * steps[:, None])).T
+
+
 def symmetrize(P: np.ndarray) -> np.ndarray:
     return 0.5 * (P + P.T)
 
@@ -47,6 +62,10 @@ class GaussianFilter:
     the gain ``K`` and the normalized innovation squared ``nis``; ``repairs`` counts covariance repairs."""
 
     name = "gaussian"
+    # What the filter needs of the model beyond f and h (the model catalog matches these):
+    # "jacobian", "input_parameter" (a scalar parameter in u with d h / d parameter),
+    # "state_parameters" (trailing states that are bounded parameters), "sensor_sets" (channels per sensor).
+    needs: frozenset = frozenset()
 
     def __init__(self, x0, P0):
         self.repairs = 0

@@ -36,6 +36,7 @@ PAPER_SCALES = (1.0, 10.0)  # eq 45: local filter 2 has ten times the covariance
 
 class DICIGeneralizedFifthDegreeCKF(GaussianFilter):
     name = "dici-gfckf"
+    needs = frozenset({"sensor_sets"})
 
     def __init__(self, x0, P0, factorization: str = "cholesky", process_scale=PAPER_SCALES,
                  initial_scale=PAPER_SCALES, fusion: str = "ici"):

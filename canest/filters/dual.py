@@ -47,6 +47,7 @@ IDENTITY = Transition(lambda X, u, dt: X)
 
 class DoubleCubatureKalmanFilter(GaussianFilter):
     name = "dckf"
+    needs = frozenset({"state_parameters"})
 
     def __init__(self, x0, P0, factorization: str = "svd", parameters: int = 4, parameter_bounds=(-np.inf, np.inf)):
         super().__init__(x0, P0)

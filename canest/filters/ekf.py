@@ -15,7 +15,9 @@ lateral model's error; it rides in the model input ``u[2]``. The parameter
 filter is a random walk ``theta+ = theta`` with ``q_theta`` per second,
 updated with the same measurements through ``C = dh/dtheta`` at the state
 filter's posterior (the decoupled form: the state's own dependence on theta
-through past steps is neglected), and clipped to ``THETA_BOUNDS``.
+through past steps is neglected), and clipped to ``THETA_BOUNDS``. Which
+entry of ``u`` holds ``theta`` is the model's business: ``parameter_index``
+(default the last input).
 """
 from __future__ import annotations
 
@@ -23,12 +25,12 @@ import numpy as np
 
 from canest.filters.base import GaussianFilter, Measurement, Transition, symmetrize
 
-PARAMETER_INDEX = 2  # u[2]: cornering stiffness scale
 THETA_BOUNDS = (0.3, 2.0)
 
 
 class ExtendedKalmanFilter(GaussianFilter):
     name = "ekf"
+    needs = frozenset({"jacobian"})
 
     def __init__(self, x0, P0, factorization: str = "cholesky"):
         super().__init__(x0, P0)
@@ -52,17 +54,19 @@ class ExtendedKalmanFilter(GaussianFilter):
 
 class DualExtendedKalmanFilter(ExtendedKalmanFilter):
     name = "dekf"
+    needs = frozenset({"jacobian", "input_parameter"})
 
     def __init__(self, x0, P0, factorization: str = "cholesky", theta0: float = 1.0, theta_std: float = 0.1,
-                 theta_noise: float = 0.02):
+                 theta_noise: float = 0.02, parameter_index: int = -1):
         super().__init__(x0, P0)
+        self.parameter_index = parameter_index
         self.theta = float(theta0)
         self.theta_var = theta_std**2
         self.theta_q = theta_noise**2
 
     def _with_theta(self, u):
         u = np.array(u, dtype=float)
-        u[PARAMETER_INDEX] = self.theta
+        u[self.parameter_index] = self.theta
         return u
 
     def predict(self, transition: Transition, u, dt: float, Q: np.ndarray) -> None:

@@ -7,7 +7,7 @@ the state as random-walk parameters:
 * after each measurement update the parameters are clipped to ``bounds``
   (the projection of the mean onto the physical range, e.g. friction 0.1-1.3)
   and to ``ceiling``, a per-update upper limit the estimator may set (where
-  the data can only bound a parameter from below: :mod:`canest.estimator_forces`);
+  the data can only bound a parameter from below: :mod:`canest.estimation.bindings`);
 * parameters in ``frozen`` (set by the estimator: not observable this tick)
   get a zero gain, so they keep their value; the Joseph update keeps the
   covariance honest for any gain;

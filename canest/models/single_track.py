@@ -41,7 +41,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from canest.config import VehicleParams
+from canest.params import VehicleParams
 from canest.models.integrate import rk4
 
 STATE_NAMES = ("yaw_rate", "beta", "vx")
@@ -58,6 +58,7 @@ class SingleTrackModel:
 
     state_names = STATE_NAMES
     measurement_names = MEASUREMENT_NAMES
+    input_parameter = 2  # u[2]: the scale theta of both cornering stiffnesses (a dual filter estimates it)
 
     def __init__(self, vehicle: VehicleParams):
         self.vehicle = vehicle

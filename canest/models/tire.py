@@ -32,29 +32,11 @@ needs the sign above (tests/test_tire_models.py integrates it).
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 
+from canest.params import TireModelParams  # noqa: F401  (re-exported: the tire model's parameters)
+
 MIN_PEAK = 1e-6  # N, guards B = K / (C D) for an unloaded tire
-
-
-@dataclass(frozen=True)
-class TireModelParams:
-    """The estimators' tire coefficients (config ``vehicle.tire``); textbook passenger-car defaults.
-
-    The cornering stiffness at static load comes from the vehicle's axle
-    cornering stiffnesses; these set the shape of the curve around it.
-    """
-
-    lateral_shape: float = 1.3  # C (Pacejka's textbook value for side force)
-    lateral_curvature: float = -0.3  # E
-    load_sensitivity: float = 2.0  # q of the degressive cornering stiffness
-    longitudinal_stiffness: float = 15.0  # K / Fz, per unit slip ratio
-    longitudinal_shape: float = 1.65  # C (textbook value for brake/drive force)
-    longitudinal_curvature: float = 0.0
-    relaxation_length: float = 0.5  # m
-    nominal_friction: float = 0.9  # mu of the 7-state tire-force model
 
 
 def cornering_stiffness(static_stiffness, fz, static_load, load_sensitivity: float):

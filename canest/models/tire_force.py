@@ -32,7 +32,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from canest.config import VehicleParams
+from canest.params import VehicleParams
 from canest.models.integrate import rk4
 from canest.models.tire import TireModelParams, friction_circle, magic_formula, relaxation_rate
 from canest.models.wheels import MIN_WHEEL_SPEED, WheelGeometry
@@ -51,6 +51,7 @@ LOW_SPEED_FORCE_TAU = 0.1  # s
 class TireForceModel:
     state_names = STATE_NAMES
     measurement_names = MEASUREMENT_NAMES
+    sensor_sets = SENSOR_SETS
 
     def __init__(self, vehicle: VehicleParams, tire: TireModelParams = TireModelParams()):
         self.vehicle = vehicle

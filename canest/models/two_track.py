@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from canest.config import VehicleParams
+from canest.params import VehicleParams
 from canest.models.tire import TireModelParams, friction_circle, magic_formula, magic_formula_slope
 from canest.models.wheels import MIN_WHEEL_SPEED, WheelGeometry
 
@@ -49,7 +49,8 @@ class TwoTrackModel:
     state_names = STATE_NAMES
     measurement_names = MEASUREMENT_NAMES
     # the dual filter's parameter block: the last four states, within the frictions a road can have
-    filter_options = {"parameters": PARAMETERS, "parameter_bounds": (LOWEST_FRICTION, HIGHEST_FRICTION)}
+    parameters = PARAMETERS  # the last states are the four frictions: bounded parameters of the filter
+    parameter_bounds = (LOWEST_FRICTION, HIGHEST_FRICTION)
 
     def __init__(self, vehicle: VehicleParams, tire: TireModelParams = TireModelParams()):
         self.vehicle = vehicle

@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from canest.config import VehicleParams
+from canest.params import VehicleParams
 from canest.models.tire import cornering_stiffness
 
 GRAVITY = 9.81

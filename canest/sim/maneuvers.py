@@ -17,7 +17,7 @@ from typing import Callable, Optional
 
 import numpy as np
 
-from canest.config import VehicleParams
+from canest.params import VehicleParams
 from canest.models.wheels import GRAVITY
 from canest.sim.plant import AIR_DENSITY, DRAG_AREA
 from canest.sim.tire import TireParams

@@ -23,7 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from canest.config import VehicleParams
+from canest.params import VehicleParams
 from canest.models.wheels import FRONT, WheelGeometry
 from canest.sim.tire import TireParams, combined_forces
 

@@ -16,8 +16,8 @@ from dataclasses import dataclass
 import can
 import numpy as np
 
-from canest.codec import InputEncoder
-from canest.config import Config
+from canest.codec.encode import InputEncoder
+from canest.settings import Config
 from canest.signals import WHEELS
 from canest.sim.maneuvers import Driver, make_maneuver
 from canest.sim.plant import PSI, R, VX, VY, W, X, Y, TwoTrackPlant

@@ -30,7 +30,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
 from canest.config import DEFAULT_CONFIG, load_config  # noqa: E402
-from canest.filters import FILTERS, Measurement, Transition  # noqa: E402
+from canest.filters import FILTERS, Measurement, Transition, make_filter  # noqa: E402
 from canest.models.single_track import SingleTrackModel  # noqa: E402
 from canest.models.tire_force import TireForceModel  # noqa: E402
 from canest.models.two_track import TwoTrackModel  # noqa: E402
@@ -94,7 +94,7 @@ def bench_canest(name, model, us, x0, P0, Q, R, z, rows):
     transition = Transition(model.transition, getattr(model, "transition_jacobian", None))
     measurement = Measurement(lambda X, u: model.measure(X, u)[:, rows], getattr(model, "measure_jacobian", None),
                               tuple(range(z.size)), getattr(model, "measure_parameter_jacobian", None))
-    filt = FILTERS[name](x0, P0, **getattr(model, "filter_options", {}))
+    filt = make_filter(name, x0, P0, model)
     if hasattr(filt, "sensor_sets") and isinstance(model, TireForceModel):  # one IMU per local filter
         imu_2 = Measurement(lambda X, u: model.measure(X, u)[:, [4, 5, 6, 3]])
         sets = [(z, measurement, R), (z, imu_2, R * 2.0)]

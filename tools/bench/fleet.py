@@ -18,7 +18,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
-from canest.batch import run_batch  # noqa: E402
+from canest.apps.batch import run_batch  # noqa: E402
 from canest.config import DEFAULT_CONFIG, load_config  # noqa: E402
 from canest.sim.simulate import simulate  # noqa: E402
 

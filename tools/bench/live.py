@@ -26,9 +26,10 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
-from canest.config import DEFAULT_CONFIG, BusConfig, load_config  # noqa: E402
-from canest.replay import play_messages  # noqa: E402
-from canest.service import Service  # noqa: E402
+from canest.config import DEFAULT_CONFIG, load_config  # noqa: E402
+from canest.settings import BusConfig  # noqa: E402
+from canest.apps.replay import play_messages  # noqa: E402
+from canest.apps.service import Service  # noqa: E402
 from canest.sim.simulate import simulate  # noqa: E402
 
 HEADER = f"{'rate':>5} {'sent':>7} {'received':>9} {'dropped':>8} {'p50 ms':>7} {'p99 ms':>7} {'max ms':>7} " \

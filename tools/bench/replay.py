@@ -26,11 +26,11 @@ import can
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
-from canest.compare import with_filter  # noqa: E402
+from canest.apps.compare import with_filter  # noqa: E402
 from canest.config import DEFAULT_CONFIG, load_config  # noqa: E402
-from canest.outputs import EstimateCsvWriter  # noqa: E402
+from canest.io.sinks import CsvSink  # noqa: E402
 from canest.pipeline import Pipeline  # noqa: E402
-from canest.replay import open_log  # noqa: E402
+from canest.io.logfiles import open_log  # noqa: E402
 from canest.sim.simulate import simulate  # noqa: E402
 
 STAGES = ("read", "decode", "estimate", "encode", "write")
@@ -63,7 +63,7 @@ class Stopwatch:
 
 
 def timed_replay(config, log_path, folder):
-    """The replay loop of canest.replay with every stage timed; returns (seconds, frames, ticks, stages)."""
+    """The replay loop of canest.apps.replay with every stage timed; returns (seconds, frames, ticks, stages)."""
     watch = Stopwatch()
     pipeline = Pipeline(config, output_channel="vcan1")
     pipeline.decoder.decode = watch.wrap("decode", pipeline.decoder.decode)
@@ -71,7 +71,7 @@ def timed_replay(config, log_path, folder):
     encode = watch.wrap("encode", pipeline.encoder.encode)
     frames = ticks = 0
     started = time.perf_counter()
-    with can.Logger(str(folder / "est.log")) as log_writer, EstimateCsvWriter(folder / "est.csv") as csv_writer:
+    with can.Logger(str(folder / "est.log")) as log_writer, CsvSink(folder / "est.csv") as csv_writer:
         write_frame = watch.wrap("write", log_writer.on_message_received)
         write_row = watch.wrap("write", csv_writer.write)
         reader = open_log(log_path)

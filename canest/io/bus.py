@@ -18,6 +18,8 @@ import time
 
 import can
 
+from canest.errors import BusOpenError
+
 log = logging.getLogger("canest.bus")
 
 BACKOFF_START = 0.1  # s
@@ -28,10 +30,6 @@ GONE = {errno.ENODEV, errno.ENXIO, errno.EBADF, errno.ENOTCONN}  # the socket is
 
 def _error_code(exc: Exception):
     return getattr(exc, "error_code", None) or getattr(exc, "errno", None)
-
-
-class BusOpenError(RuntimeError):
-    pass
 
 
 def open_bus(kwargs: dict, role: str, **extra) -> can.BusABC:

@@ -32,9 +32,10 @@ from pathlib import Path
 
 import numpy as np
 
-from canest.config import Config
-from canest.estimator import VALID_BITS
-from canest.evaluate import read_table, score
+from canest.errors import UsageError
+from canest.settings import Config
+from canest.estimation.estimate import VALID_BITS
+from canest.apps.evaluate import read_table, score
 
 SUMMARY = "summary.json"
 ESTIMATES = "estimates.csv"
@@ -47,7 +48,7 @@ def find_logs(patterns) -> list:
     paths = sorted({Path(p).resolve() for pattern in patterns for p in glob.glob(str(pattern), recursive=True)
                     if Path(p).is_file() and not p.endswith(TRUTH_SUFFIXES)})
     if not paths:
-        raise ValueError(f"no log matches {' '.join(map(str, patterns))}")
+        raise UsageError(f"no log matches {' '.join(map(str, patterns))}")
     return paths
 
 
@@ -96,8 +97,8 @@ def _write_atomically(path: Path, text: str) -> None:
 
 def run_task(config: Config, task: Task, config_fingerprint: str) -> dict:
     """Replay one log with one filter (runs on a worker); returns its summary row."""
-    from canest.compare import with_filter
-    from canest.replay import replay
+    from canest.apps.compare import with_filter
+    from canest.apps.replay import replay
 
     started = time.perf_counter()
     task.out.mkdir(parents=True, exist_ok=True)

@@ -12,7 +12,7 @@ import logging
 import os
 import socket
 
-log = logging.getLogger("canest.notify")
+log = logging.getLogger("canest.apps.notify")
 
 
 class Notifier:

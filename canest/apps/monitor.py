@@ -13,8 +13,8 @@ from collections import Counter
 
 import can
 
-from canest import integrity
-from canest.outputs import OUTPUT_MESSAGES, STATUS_MESSAGE, integrity_signals
+from canest.codec import integrity
+from canest.codec.encode import OUTPUT_MESSAGES, STATUS_MESSAGE, integrity_signals
 from canest.signals import INPUT_GROUPS
 
 # (label, message, signal stem, display unit, factor from SI)

@@ -13,7 +13,7 @@ identical to replay's.
 What the loop guarantees:
 
 - it never blocks on output: a frame the output bus refuses is dropped and
-  counted (:mod:`canest.buslink`), and a lost bus is reopened with backoff;
+  counted (:mod:`canest.io.bus`), and a lost bus is reopened with backoff;
 - it transmits at most one set of estimate frames per loop pass, the newest:
   when several ticks complete at once (after a stall) the older ones are
   logged to the CSV but not sent (``superseded``), so the output never bursts
@@ -35,12 +35,14 @@ from collections import Counter, deque
 
 import numpy as np
 
-from canest.buslink import BusLink
-from canest.config import Config, ConfigError
-from canest.notify import Notifier
+from canest.io.bus import BusLink
+from canest.io.sinks import BusSink
+from canest.errors import ConfigError
+from canest.settings import Config
+from canest.apps.notify import Notifier
 from canest.pipeline import Pipeline, format_summary
 
-log = logging.getLogger("canest.service")
+log = logging.getLogger("canest.apps.service")
 
 TICK_MARGIN = 0.001  # s after a tick's time before it runs without a later frame
 STATUS_EVERY = 10.0  # s between status log lines
@@ -51,14 +53,15 @@ LATENCY_WINDOW = 10_000  # send latencies kept for percentiles, cleared at every
 class Service:
     """Run the pipeline on live buses until :meth:`stop` (or SIGINT/SIGTERM) is called.
 
+    Every tick's estimates go to ``sinks`` (:mod:`canest.io.sinks`, e.g. a CSV
+    or a callback) and the newest of each pass to the output bus.
     ``reload_config`` (no arguments, returns a Config) is called on SIGHUP.
     """
 
-    def __init__(self, config: Config, on_estimate=None, csv_writer=None, reload_config=None, notifier=None):
+    def __init__(self, config: Config, sinks=(), reload_config=None, notifier=None):
         self.config = config
         self.pipeline = Pipeline(config, output_channel=config.output_bus.channel)
-        self.on_estimate = on_estimate
-        self.csv_writer = csv_writer
+        self.sinks = list(sinks)
         self.reload_config = reload_config
         self.notifier = notifier or Notifier()
         self.stopping = threading.Event()
@@ -68,7 +71,7 @@ class Service:
         self.earlier = Counter()  # summaries of pipelines replaced by a reload
         self.latency = deque(maxlen=LATENCY_WINDOW)
         self.ready = False
-        self.inputs = self.outputs = None
+        self.inputs = self.outputs = self.bus_sink = None
 
     def stop(self, *_args) -> None:
         self.stopping.set()
@@ -84,6 +87,7 @@ class Service:
         output_kwargs = self.config.output_bus.kwargs()
         self.inputs = BusLink(input_kwargs, "input", self.counts, can_filters=self.pipeline.decoder.can_filters())
         self.outputs = self.inputs if output_kwargs == input_kwargs else BusLink(output_kwargs, "output", self.counts)
+        self.bus_sink = BusSink(self.outputs, self.pipeline.encoder, self.counts)
 
     def _close(self) -> None:
         for link in {id(self.inputs): self.inputs, id(self.outputs): self.outputs}.values():
@@ -91,16 +95,10 @@ class Service:
                 link.close()
 
     def _publish(self, estimates) -> None:
-        for estimate in estimates:
-            self.counts["ticks"] += 1
-            if self.csv_writer:
-                self.csv_writer.write(estimate)
-            if self.on_estimate:
-                self.on_estimate(estimate)
-        self.counts["superseded"] += len(estimates) - 1
+        self.counts["ticks"] += len(estimates)
+        for sink in (*self.sinks, self.bus_sink):
+            sink.publish(estimates)
         newest = estimates[-1]
-        for frame in self.pipeline.encoder.encode(newest):
-            self.counts["sent" if self.outputs.send(frame) else "send_dropped"] += 1
         self.latency.append(time.time() - newest.t)
         if not self.ready and any(newest.valid.values()):
             self.ready = True
@@ -175,6 +173,8 @@ class Service:
         if buses_changed:
             self._close()
             self._open()
+        else:
+            self.bus_sink.encoder = self.pipeline.encoder
         self.counts["reloads"] += 1
         log.info("config reloaded from %s%s", config.path, "; buses reopened" if buses_changed else "")
 

@@ -2,7 +2,7 @@
 
 Each filter replays the log through the full pipeline (so each sees exactly
 the decoded, resampled inputs the daemon would), its estimates are scored
-against the truth (:mod:`canest.evaluate`), and the wall time of every
+against the truth (:mod:`canest.apps.evaluate`), and the wall time of every
 predict + update is recorded.
 """
 from __future__ import annotations
@@ -12,10 +12,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from canest.config import FILTER_MODELS, MODEL_FILTERS, Config
-from canest.evaluate import DISPLAY, score
+from canest.errors import UsageError
+from canest.apps.evaluate import DISPLAY, score
+from canest.apps.replay import replay
+from canest.estimation import catalog
 from canest.filters import FILTERS
-from canest.replay import replay
+from canest.settings import Config
 
 STATES = ("vx", "yaw_rate", "beta")
 
@@ -32,12 +34,13 @@ class FilterRun:
 def with_filter(config: Config, name: str) -> Config:
     """The config with another filter, its own default factorization and no filter-specific options.
 
-    The model follows the filter where the filter needs one (``dckf``, ``dici-gfckf``); otherwise
-    the configured model stays (so ``ckf`` and ``gfckf`` run on the tire-force model for the
-    DICI-GFCKF comparison) unless it needs a specific filter, then the single-track model is used.
+    The configured model stays where the filter runs on it (so ``ckf`` and ``gfckf`` run on the
+    tire-force model for the DICI-GFCKF comparison); otherwise the catalog's model for the filter
+    (the single-track model, or the one the filter needs: ``dckf``, ``dici-gfckf``).
     """
     model = config.estimator.model
-    model = FILTER_MODELS.get(name, "single_track" if model in MODEL_FILTERS else model)
+    if catalog.misfit(name, model):
+        model = catalog.model_for(name)
     est = dataclasses.replace(config.estimator, filter=name, model=model, factorization=None, filter_options={})
     return dataclasses.replace(config, estimator=est)
 
@@ -63,7 +66,7 @@ def parse_filters(text: str) -> list:
     names = list(FILTERS) if text == "all" else [n.strip() for n in text.split(",") if n.strip()]
     unknown = [n for n in names if n not in FILTERS]
     if unknown:
-        raise ValueError(f"--filters: unknown filter {unknown[0]!r}; available: all, {', '.join(FILTERS)}")
+        raise UsageError(f"--filters: unknown filter {unknown[0]!r}; available: all, {', '.join(FILTERS)}")
     return names
 
 

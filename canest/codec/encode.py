@@ -1,24 +1,24 @@
-"""Estimates out: frames of the output DBC, and the per-tick CSV.
+"""Frames out: estimates as frames of the output DBC, and canonical inputs as frames of the input DBC.
 
 The output DBC is canest's published contract (``dbc/canest_estimates.dbc``);
 ``OUTPUT_MESSAGES`` names, per message, which estimate field fills which
 signal. A message is sent when the running estimator provides all its values;
 the status message is sent every tick. Each frame gets its rolling counter and
-CRC (:mod:`canest.integrity`). A value that is not a number is sent as 0 with
+CRC (:mod:`canest.codec.integrity`). A value that is not a number is sent as 0 with
 its validity bit cleared; a value or standard deviation beyond its signal's
 range is sent saturated.
 """
 from __future__ import annotations
 
-import csv
 import math
 
 import can
 
-from canest import integrity
-from canest.codec import clamp_to_signal
-from canest.config import load_database
-from canest.estimator import Estimate
+from canest.codec import integrity
+from canest.codec.dbc import clamp_to_signal, load_database
+from canest.codec.decode import InputDecoder
+from canest.estimation.estimate import Estimate
+from canest.settings import Config
 from canest.signals import WHEELS
 
 _WHEEL_SIGNAL = {"fl": "FL", "fr": "FR", "rl": "RL", "rr": "RR"}
@@ -114,30 +114,41 @@ class EstimateEncoder:
         return frames
 
 
-class EstimateCsvWriter:
-    """One row per tick: ``t``, the states, their ``_std`` columns, ``valid`` (bit mask) and ``mode``.
+class InputEncoder:
+    """Encode canonical SI values into input frames (the simulator's side of the signal map)."""
 
-    ``valid`` bits: 0 vx, 1 vy, 2 beta, 3 yaw rate, 4 lateral forces, 5 friction, 6 friction observable now.
-    """
+    def __init__(self, config: Config):
+        self.decoder_plans = InputDecoder(config).plans
+        self.counters = {fid: 0 for fid in self.decoder_plans}
+        self.pages = {fid: 0 for fid in self.decoder_plans}
 
-    def __init__(self, path):
-        self.handle = open(path, "w", newline="")
-        self.writer = csv.writer(self.handle)
-        self.columns = None
+    @property
+    def messages(self):
+        return [plan.message for plan in self.decoder_plans.values()]
 
-    def write(self, estimate: Estimate) -> None:
-        if self.columns is None:
-            states = [k for k in estimate.values if not k.endswith("_std")]
-            self.columns = states + [f"{k}_std" for k in states]
-            self.writer.writerow(["t", *self.columns, "valid", "mode"])
-        self.writer.writerow([f"{estimate.t:.6f}", *(f"{estimate.values[c]:.9g}" for c in self.columns),
-                              estimate.valid_flags, estimate.mode])
-
-    def close(self) -> None:
-        self.handle.close()
-
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *exc):
-        self.close()
+    def encode(self, frame_id: int, si_values: dict, timestamp: float, channel: str = "vcan0") -> can.Message:
+        plan = self.decoder_plans[frame_id]
+        message = plan.message
+        pages = sorted({s.multiplexer_value for s in plan.specs if s.multiplexer_value is not None})
+        page = pages[self.pages[frame_id] % len(pages)] if pages else None
+        self.pages[frame_id] += 1
+        values = {}
+        for signal in message.signals:
+            if signal.multiplexer_ids and page not in signal.multiplexer_ids:
+                continue
+            values[signal.name] = page if signal.is_multiplexer else clamp_to_signal(signal, 0.0)
+        for spec in plan.specs:
+            if spec.signal in values and spec.canonical in si_values:
+                raw = (si_values[spec.canonical] - spec.offset) / spec.factor
+                values[spec.signal] = clamp_to_signal(plan.signal_by_name[spec.signal], raw)
+        checks = plan.checks
+        if checks.counter:
+            values[checks.counter] = self.counters[frame_id]
+            self.counters[frame_id] = (self.counters[frame_id] + 1) % plan.counter_modulus
+        if checks.valid:
+            values[checks.valid] = 1
+        data = bytearray(message.encode(values, strict=False))
+        if plan.crc_index is not None:
+            data = integrity.seal(frame_id, data, plan.crc_index)
+        return can.Message(timestamp=timestamp, arbitration_id=frame_id, is_extended_id=message.is_extended_frame,
+                           data=bytes(data), is_fd=message.is_fd, channel=channel)

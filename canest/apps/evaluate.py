@@ -12,7 +12,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from canest.estimator import VALID_BITS
+from canest.errors import TableError
+from canest.estimation.estimate import VALID_BITS
 from canest.signals import WHEELS
 
 # state -> (display unit, factor from SI)
@@ -33,10 +34,10 @@ def read_table(path) -> dict:
         try:
             header = next(reader)
         except StopIteration:
-            raise ValueError(f"{path}: empty file") from None
+            raise TableError(f"{path}: empty file") from None
         rows = list(reader)
     if "t" not in header:
-        raise ValueError(f"{path}: no 't' column in header {header}")
+        raise TableError(f"{path}: no 't' column in header {header}")
     table = {}
     for i, name in enumerate(header):
         column = [row[i] for row in rows]

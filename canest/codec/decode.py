@@ -1,10 +1,10 @@
-"""DBC decoding of input frames to SI signals, and encoding the other way.
+"""DBC decoding of input frames to SI signals.
 
 :class:`InputDecoder` turns a ``can.Message`` into canonical SI values through
 the config's signal map, checking integrity and counting every frame it does
-not use by cause. :class:`InputEncoder` is its inverse (the simulator writes
-logs through it, so a simulated log follows any config's DBC). The encoder of
-estimates lives in :mod:`canest.outputs`.
+not use by cause, and answers the timeouts of its inputs. Its inverse,
+:class:`canest.codec.encode.InputEncoder`, lets the simulator write logs
+through any config's DBC.
 """
 from __future__ import annotations
 
@@ -13,16 +13,11 @@ from collections import Counter
 
 import can
 
-from canest import integrity
-from canest.config import Config, ConfigError, MessageChecks, load_database
-from canest.plausibility import SlewLimit
-
-
-def clamp_to_signal(signal, value: float) -> float:
-    """Limit a physical value to the signal's DBC range."""
-    low = signal.minimum if signal.minimum is not None else -math.inf
-    high = signal.maximum if signal.maximum is not None else math.inf
-    return min(max(value, low), high)
+from canest.codec import integrity
+from canest.codec.dbc import load_database
+from canest.errors import ConfigError
+from canest.settings import Config, MessageChecks
+from canest.codec.plausibility import SlewLimit
 
 
 class _MessagePlan:
@@ -43,6 +38,8 @@ class _MessagePlan:
         self.counter_modulus = 2 ** self.signal_by_name[self.checks.counter].length if self.checks.counter else 0
 
 
+DEFAULT_CYCLE_TIME = 0.1  # s, for messages whose DBC gives no GenMsgCycleTime
+MIN_TIMEOUT = 0.05  # s
 MAX_COUNTER_DELTA = 3  # accept up to two lost frames between consecutive counters (AUTOSAR E2E MaxDeltaCounter)
 
 
@@ -54,7 +51,7 @@ class InputDecoder:
     frames; a larger jump is rejected (``counter_sequence``) and the new
     value becomes the reference, so a sender that restarted is followed from
     its next frame on. Last, values that change faster than physics allows
-    are rejected (``implausible``, :mod:`canest.plausibility`).
+    are rejected (``implausible``, :mod:`canest.codec.plausibility`).
     """
 
     def __init__(self, config: Config):
@@ -66,8 +63,18 @@ class InputDecoder:
         for name, specs in by_message.items():
             message = self.database.get_message_by_name(name)
             self.plans[message.frame_id] = _MessagePlan(message, specs, config.messages.get(name), config.path)
+        self.frame_of = {spec.canonical: fid for fid, plan in self.plans.items() for spec in plan.specs}
         self.plausible = SlewLimit(config.signals)
         self.counts = Counter()
+
+    def cycle_time(self, canonical: str) -> float:
+        """Seconds between frames of the message carrying ``canonical`` (the DBC's, else ``DEFAULT_CYCLE_TIME``)."""
+        message = self.plans[self.frame_of[canonical]].message
+        return (message.cycle_time or DEFAULT_CYCLE_TIME * 1000) / 1000.0
+
+    def timeouts(self, timeout_cycles: float) -> dict:
+        """Per canonical input: ``timeout_cycles`` times its message's cycle time (at least ``MIN_TIMEOUT``)."""
+        return {name: max(timeout_cycles * self.cycle_time(name), MIN_TIMEOUT) for name in self.frame_of}
 
     @property
     def frame_ids(self):
@@ -133,43 +140,3 @@ class InputDecoder:
             return self._reject("implausible")
         self.counts["decoded"] += 1
         return out
-
-
-class InputEncoder:
-    """Encode canonical SI values into input frames (the simulator's side of the signal map)."""
-
-    def __init__(self, config: Config):
-        self.decoder_plans = InputDecoder(config).plans
-        self.counters = {fid: 0 for fid in self.decoder_plans}
-        self.pages = {fid: 0 for fid in self.decoder_plans}
-
-    @property
-    def messages(self):
-        return [plan.message for plan in self.decoder_plans.values()]
-
-    def encode(self, frame_id: int, si_values: dict, timestamp: float, channel: str = "vcan0") -> can.Message:
-        plan = self.decoder_plans[frame_id]
-        message = plan.message
-        pages = sorted({s.multiplexer_value for s in plan.specs if s.multiplexer_value is not None})
-        page = pages[self.pages[frame_id] % len(pages)] if pages else None
-        self.pages[frame_id] += 1
-        values = {}
-        for signal in message.signals:
-            if signal.multiplexer_ids and page not in signal.multiplexer_ids:
-                continue
-            values[signal.name] = page if signal.is_multiplexer else clamp_to_signal(signal, 0.0)
-        for spec in plan.specs:
-            if spec.signal in values and spec.canonical in si_values:
-                raw = (si_values[spec.canonical] - spec.offset) / spec.factor
-                values[spec.signal] = clamp_to_signal(plan.signal_by_name[spec.signal], raw)
-        checks = plan.checks
-        if checks.counter:
-            values[checks.counter] = self.counters[frame_id]
-            self.counters[frame_id] = (self.counters[frame_id] + 1) % plan.counter_modulus
-        if checks.valid:
-            values[checks.valid] = 1
-        data = bytearray(message.encode(values, strict=False))
-        if plan.crc_index is not None:
-            data = integrity.seal(frame_id, data, plan.crc_index)
-        return can.Message(timestamp=timestamp, arbitration_id=frame_id, is_extended_id=message.is_extended_frame,
-                           data=bytes(data), is_fd=message.is_fd, channel=channel)

@@ -6,7 +6,6 @@ Readers and writers are python-can's, chosen by file suffix (.log candump,
 from __future__ import annotations
 
 import os
-import struct
 import time
 from contextlib import ExitStack
 from pathlib import Path
@@ -14,49 +13,12 @@ from pathlib import Path
 import can
 from tqdm import tqdm
 
-from canest.config import Config
-from canest.outputs import EstimateCsvWriter
+from canest.io.logfiles import byte_position, frames, open_log
+from canest.io.sinks import CallbackSink, CsvSink, LogSink
 from canest.pipeline import Pipeline
+from canest.settings import Config
 
 PROGRESS_EVERY = 2000  # frames between progress-bar updates
-
-
-def open_log(path) -> can.LogReader:
-    path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"{path}: log file not found")
-    try:
-        return can.LogReader(str(path))
-    except ValueError as exc:
-        raise ValueError(f"{path}: {exc}") from None
-
-
-def _byte_position(reader):
-    """A callable giving how far into its file ``reader`` is, or None if it cannot tell."""
-    handle = getattr(reader, "file", None)
-    handle = getattr(handle, "buffer", handle)  # text readers: the binary buffer can still tell
-    if handle is None or not hasattr(handle, "tell"):
-        return None
-    try:
-        handle.tell()
-    except OSError:
-        return None
-    return handle.tell
-
-
-def _frames(reader, log_path):
-    """The reader's frames; a frame it cannot parse ends the replay with the file and frame number."""
-    count = 0
-    iterator = iter(reader)
-    while True:
-        try:
-            msg = next(iterator)
-        except StopIteration:
-            return
-        except (ValueError, IndexError, KeyError, struct.error) as exc:
-            raise ValueError(f"{log_path}: frame {count + 1} is unreadable ({type(exc).__name__}: {exc})") from None
-        count += 1
-        yield msg
 
 
 def replay(config: Config, log_path, out_log=None, out_csv=None, progress: bool = True, on_estimate=None,
@@ -69,20 +31,18 @@ def replay(config: Config, log_path, out_log=None, out_csv=None, progress: bool 
     pipeline.estimator.step_times = step_times
     reader = open_log(log_path)
     with ExitStack() as stack:
-        writer = stack.enter_context(can.Logger(str(out_log))) if out_log else None
-        csv_writer = stack.enter_context(EstimateCsvWriter(out_csv)) if out_csv else None
+        sinks = [stack.enter_context(sink) for sink in (
+            CsvSink(out_csv) if out_csv else None,
+            LogSink(out_log, pipeline.encoder) if out_log else None,
+            CallbackSink(on_estimate) if on_estimate else None) if sink is not None]
         bar = stack.enter_context(tqdm(total=os.path.getsize(log_path), unit="B", unit_scale=True,
                                        desc=f"replay {Path(log_path).name}", disable=None if progress else True, leave=False))
-        position = _byte_position(reader)
-        for count, msg in enumerate(_frames(reader, log_path), 1):
-            for estimate in pipeline.feed(msg):
-                if csv_writer:
-                    csv_writer.write(estimate)
-                if writer:
-                    for frame in pipeline.encoder.encode(estimate):
-                        writer.on_message_received(frame)
-                if on_estimate:
-                    on_estimate(estimate)
+        position = byte_position(reader)
+        for count, msg in enumerate(frames(reader, log_path), 1):
+            estimates = pipeline.feed(msg)
+            if estimates:
+                for sink in sinks:
+                    sink.publish(estimates)
             if position is not None and count % PROGRESS_EVERY == 0:
                 bar.update(position() - bar.n)
         reader.stop()

@@ -2,7 +2,7 @@
 
 Three parties share two python-can virtual buses, exactly as on a vehicle:
 a player sends the simulated vehicle's frames onto the input bus in real
-time; the estimation service (the same :class:`~canest.service.Service` the
+time; the estimation service (the same :class:`~canest.apps.service.Service` the
 daemon runs) estimates and sends its frames onto the output bus; a monitor
 decodes those frames with the output DBC and prints them next to the truth.
 At the end the estimates are scored against the truth.
@@ -16,11 +16,12 @@ import time
 import can
 import numpy as np
 
-from canest.config import BusConfig, Config
-from canest.evaluate import format_table, score
+from canest.settings import BusConfig, Config
+from canest.apps.evaluate import format_table, score
 from canest.pipeline import format_summary
-from canest.replay import play_messages
-from canest.service import Service
+from canest.apps.replay import play_messages
+from canest.apps.service import Service
+from canest.io.sinks import CallbackSink
 from canest.sim.simulate import simulate
 
 INPUT_CHANNEL = "canest-demo-in"
@@ -33,7 +34,7 @@ class _Monitor(threading.Thread):
 
     def __init__(self, config: Config, truth: dict, clock: dict, speed: float, out):
         super().__init__(daemon=True)
-        from canest.config import load_database
+        from canest.codec.dbc import load_database
 
         self.db = load_database(config.output_dbc, "demo")
         self.truth, self.clock, self.speed, self.out = truth, clock, speed, out
@@ -76,13 +77,15 @@ class _Monitor(threading.Thread):
 
 
 def run_demo(config: Config, maneuver="dlc", speed_kmh=80.0, mu=0.85, seed=0, playback_speed=1.0, out=None,
-             csv_writer=None) -> list:
-    """Run the demonstration; return the accuracy scores (``canest.evaluate.Score``)."""
+             sinks=()) -> list:
+    """Run the demonstration; return the accuracy scores (``canest.apps.evaluate.Score``).
+
+    ``sinks`` (:mod:`canest.io.sinks`) also receive every estimate."""
     config = config.with_buses(BusConfig("virtual", INPUT_CHANNEL), BusConfig("virtual", OUTPUT_CHANNEL))
     print(f"simulating {maneuver} at {speed_kmh:g} km/h, mu {mu} ({config.vehicle.name}) ...", file=out, flush=True)
     sim = simulate(config, maneuver, speed_kmh, mu, seed=seed, channel=INPUT_CHANNEL)
     estimates = []
-    service = Service(config, on_estimate=estimates.append, csv_writer=csv_writer)
+    service = Service(config, sinks=[CallbackSink(estimates.append), *sinks])
     clock = {}
     monitor = _Monitor(config, sim.truth, clock, playback_speed, out)
     player_bus = can.Bus(interface="virtual", channel=INPUT_CHANNEL)

@@ -1,0 +1,89 @@
+"""The catalog of vehicle models: one row per model, everything the rest of canest asks about it.
+
+In the spirit of openpilot's ``car_kf.py`` (states, observations and filter
+in one place): a row names the model class, its binding to the inputs (the
+estimator subclass), its default filter and the inputs it needs. Which
+filters run on it follows from what each filter ``needs`` and what the model
+offers (:func:`canest.filters.fits`), so no table of pairs can disagree with
+the code. The config loader, compare, batch and the pipeline ask only this
+module.
+
+To add a model: its file in ``canest/models/``, its binding in
+``canest/estimation/``, one row in :data:`CATALOG` (and output DBC signals if
+it publishes new states).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from canest.estimation.single_track import SingleTrackEstimator
+from canest.estimation.tire_force import TireForceEstimator
+from canest.estimation.two_track import FrictionEstimator
+from canest.filters import FILTERS, fits
+from canest.models.single_track import SingleTrackModel
+from canest.models.tire_force import TireForceModel
+from canest.models.two_track import TwoTrackModel
+from canest.signals import INPUT_GROUPS, WHEELS
+
+BASE_INPUTS = ("steering_wheel_angle", "ax", "ay", "yaw_rate", *(f"wheel_speed_{w}" for w in WHEELS))
+
+
+@dataclass(frozen=True)
+class ModelEntry:
+    """One model: its class, its binding, its default filter and the inputs it (and a filter need) requires."""
+
+    name: str
+    model: type
+    estimator: type
+    default_filter: str
+    required_inputs: tuple
+    inputs_per_need: dict = field(default_factory=dict)  # a filter need -> the inputs it adds (e.g. a second IMU)
+
+    @property
+    def filters(self) -> tuple:
+        """The filters that run on this model, in the order of :data:`canest.filters.FILTERS`."""
+        return tuple(name for name in FILTERS if fits(name, self.model))
+
+    def inputs_for(self, filter_name: str) -> tuple:
+        """Inputs the model and the filter ``filter_name`` need together."""
+        extra = [inputs for need, inputs in self.inputs_per_need.items() if need in FILTERS[filter_name].needs]
+        return self.required_inputs + tuple(name for group in extra for name in group)
+
+    @property
+    def restricts_filters(self) -> bool:
+        """True if only some filters run on it (it has parameter states): a misfit then asks for another filter."""
+        return bool(getattr(self.model, "parameters", 0))
+
+
+CATALOG = {entry.name: entry for entry in (
+    ModelEntry("single_track", SingleTrackModel, SingleTrackEstimator, "ckf", BASE_INPUTS),
+    ModelEntry("tire_force", TireForceModel, TireForceEstimator, "ckf", BASE_INPUTS + INPUT_GROUPS["motor_torques"],
+               {"sensor_sets": INPUT_GROUPS["imu_2"]}),
+    ModelEntry("two_track", TwoTrackModel, FrictionEstimator, "jckf", BASE_INPUTS + INPUT_GROUPS["motor_torques"]),
+)}
+DEFAULT_MODEL = "single_track"
+
+
+def model_for(filter_name: str, preferred: str = DEFAULT_MODEL) -> str:
+    """``preferred`` if the filter runs on it, else the first catalog model it runs on."""
+    if fits(filter_name, CATALOG[preferred].model):
+        return preferred
+    return next(name for name, entry in CATALOG.items() if fits(filter_name, entry.model))
+
+
+def misfit(filter_name: str, model: str) -> str | None:
+    """None if the pair runs; else what to change, naming the allowed choices."""
+    entry = CATALOG[model]
+    if fits(filter_name, entry.model):
+        return None
+    if entry.restricts_filters:
+        return (f"filter '{filter_name}' and model '{model}' do not fit: use filter '{entry.default_filter}' "
+                f"(model '{model}' runs with {', '.join(entry.filters)})")
+    models = [name for name, other in CATALOG.items() if fits(filter_name, other.model)]
+    return (f"filter '{filter_name}' and model '{model}' do not fit: use model '{models[0]}' "
+            f"(filter '{filter_name}' runs on {', '.join(models)})")
+
+
+def make_estimator(config):
+    """The estimator of the configured model."""
+    return CATALOG[config.estimator.model].estimator(config)

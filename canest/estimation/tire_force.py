@@ -1,0 +1,82 @@
+"""Binding of the 7-state tire-force model (:mod:`canest.models.tire_force`) to the tick core.
+
+Four lateral tire forces beside yaw rate, sideslip and vx, with any
+sigma-point filter on the first IMU, or with ``dici-gfckf`` whose local
+filters each get one IMU (plus the shared wheel speeds). The model's input
+``Fx`` per wheel comes from the motor torques and the wheel accelerations
+(DICI-GFCKF eq 4, :mod:`canest.models.wheel_force`). The lateral channels
+(ax, ay) are skipped at low speed, as the single-track binding skips ay.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from canest.estimation.channels import rows_of
+from canest.estimation.core import Estimator
+from canest.estimation.inputs import WHEEL_SPEEDS, TickInputs
+from canest.models import tire_force
+from canest.models.tire_force import TireForceModel
+from canest.models.wheel_force import WheelAcceleration, longitudinal_forces
+from canest.signals import INPUT_GROUPS, WHEELS
+
+TORQUES = INPUT_GROUPS["motor_torques"]
+LATERAL_FORCES = tuple(f"fy_{w}" for w in WHEELS)
+SENSOR_SETS = np.array(tire_force.SENSOR_SETS)
+
+
+def torques(inputs: TickInputs) -> np.ndarray:
+    """The four motor torques as held (0 where not mapped)."""
+    return np.array([inputs.values.get(name, 0.0) for name in TORQUES])
+
+
+def accelerations(inputs: TickInputs) -> tuple[float, float]:
+    """(ax, ay) as held, 0 where stale."""
+    return inputs.current("ax"), inputs.current("ay")
+
+
+class TireForceEstimator(Estimator):
+    extra_states = LATERAL_FORCES
+
+    def __init__(self, config):
+        super().__init__(config, TireForceModel(config.vehicle, config.vehicle.tire))
+        self.wheel_acceleration = WheelAcceleration()
+
+    def reset(self) -> None:
+        super().reset()
+        self.wheel_acceleration.reset()
+
+    def _initial_state(self, inputs: TickInputs) -> np.ndarray:
+        """As the single track, and each lateral force at its load share of ``m ay``."""
+        x0 = super()._initial_state(inputs)
+        ax, ay = accelerations(inputs)
+        loads = self.model.wheels.loads(ax, ay)
+        x0[tire_force.FY] = self.vehicle.mass * ay * loads / loads.sum()
+        return x0
+
+    def _control(self, inputs: TickInputs, t: float) -> np.ndarray:
+        """u = (delta, ax, ay, Fx per wheel from eq 4)."""
+        speeds = [inputs.values.get(name, 0.0) for name in WHEEL_SPEEDS]
+        fx = longitudinal_forces(torques(inputs), self.wheel_acceleration.update(t, speeds),
+                                 self.vehicle.wheel_inertia, self.vehicle.wheel_radius)
+        return np.array([self._road_wheel_angle(inputs), *accelerations(inputs), *fx])
+
+    def _update(self, inputs: TickInputs, u: np.ndarray, lateral_ok: bool, t: float) -> bool:
+        """Non-DICI filters use the first IMU; ``dici-gfckf`` gives local filter j the rows of IMU j."""
+        channels = self._channels(inputs, t, lateral_ok)
+        if not hasattr(self.filter, "sensor_sets"):
+            return self._apply(channels, u, t, mask=SENSOR_SETS <= 1)
+        local_masks = [channels.mask & ((SENSOR_SETS == 0) | (SENSOR_SETS == j + 1))
+                       for j in range(self.filter.sensor_sets)]
+        if not any(m.any() for m in local_masks):
+            return False
+        compensate = self.latency_compensation and not self.low_speed
+        given = [rows_of(channels, self.model, compensate, m) if m.any() else None for m in local_masks]
+        self.filter.update_sets(given, u)
+        return self._diverged(t)
+
+    def _extra_values(self, values: dict, valid: dict, std: np.ndarray, inputs: TickInputs, lateral_ok: bool) -> None:
+        ok = lateral_ok and inputs.has(*TORQUES, *WHEEL_SPEEDS)
+        for name, force, force_std in zip(LATERAL_FORCES, self.filter.x[tire_force.FY], std[tire_force.FY]):
+            values[name], values[f"{name}_std"] = force, force_std
+            valid[name] = ok
+        valid["forces"] = ok

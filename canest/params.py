@@ -1,0 +1,51 @@
+"""Vehicle and tire parameter types, in SI units.
+
+The models take these; the YAML loader (:mod:`canest.config`) fills them. They
+sit below both so that no model imports the configuration.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class TireModelParams:
+    """The estimators' tire coefficients (config ``vehicle.tire``); textbook passenger-car defaults.
+
+    The cornering stiffness at static load comes from the vehicle's axle
+    cornering stiffnesses; these set the shape of the curve around it.
+    """
+
+    lateral_shape: float = 1.3  # C (Pacejka's textbook value for side force)
+    lateral_curvature: float = -0.3  # E
+    load_sensitivity: float = 2.0  # q of the degressive cornering stiffness
+    longitudinal_stiffness: float = 15.0  # K / Fz, per unit slip ratio
+    longitudinal_shape: float = 1.65  # C (textbook value for brake/drive force)
+    longitudinal_curvature: float = 0.0
+    relaxation_length: float = 0.5  # m
+    nominal_friction: float = 0.9  # mu of the 7-state tire-force model
+
+
+
+@dataclass(frozen=True)
+class VehicleParams:
+    """Vehicle parameters in SI units. Cornering stiffnesses are per axle, positive."""
+
+    name: str
+    mass: float
+    yaw_inertia: float
+    cg_to_front: float
+    cg_to_rear: float
+    track_front: float
+    track_rear: float
+    cg_height: float
+    wheel_radius: float
+    wheel_inertia: float
+    steering_ratio: float
+    cornering_stiffness_front: float
+    cornering_stiffness_rear: float
+    tire: TireModelParams = TireModelParams()
+
+    @property
+    def wheelbase(self) -> float:
+        return self.cg_to_front + self.cg_to_rear

@@ -1,0 +1,83 @@
+"""What a config says, as typed values: buses, the signal map, integrity checks, the estimator.
+
+Pure data (no YAML, no DBC): the stages take these; :mod:`canest.config`
+reads and validates them from a file.
+"""
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from canest.params import VehicleParams
+
+
+@dataclass(frozen=True)
+class BusConfig:
+    """Arguments for ``can.Bus``: interface, channel and any extra keyword."""
+
+    interface: str = "socketcan"
+    channel: str = "vcan0"
+    options: dict = field(default_factory=dict)
+
+    def kwargs(self) -> dict:
+        return {"interface": self.interface, "channel": self.channel, **self.options}
+
+
+@dataclass(frozen=True)
+class SignalSpec:
+    """Where a canonical signal lives and how its DBC value becomes SI: si = factor * value + offset."""
+
+    canonical: str
+    message: str
+    signal: str
+    factor: float
+    offset: float = 0.0
+    multiplexer_value: int | None = None
+
+
+@dataclass(frozen=True)
+class MessageChecks:
+    """Optional integrity signals of an input message."""
+
+    counter: str | None = None
+    checksum: str | None = None
+    valid: str | None = None
+
+
+@dataclass(frozen=True)
+class EstimatorConfig:
+    filter: str = "ckf"
+    model: str = "single_track"  # single_track, tire_force (7 states) or two_track (7-DOF + friction)
+    factorization: str | None = None  # None: the filter's own default (svd for svd-fckf, else cholesky)
+    filter_options: dict = field(default_factory=dict)
+    rate_hz: float = 100.0
+    min_speed: float = 3.0
+    speed_hysteresis: float = 1.0
+    timeout_cycles: float = 5.0
+    friction_excitation: float = 1500.0  # N per unit mu: |dF/dmu| at mu - 3 std that makes a wheel excited
+    friction_correlation: float = 0.9  # prior correlation of the four wheels' frictions (same road)
+    latency_compensation: bool = False
+    process_noise: dict = field(default_factory=lambda: {
+        "yaw_rate": 0.05, "beta": 0.01, "vx": 0.3, "lateral_force": 3000.0, "wheel_speed": 5.0, "friction": 0.1})
+    measurement_noise: dict = field(default_factory=lambda: {
+        "ay": 0.15, "yaw_rate": 0.005, "vx_wheel": 0.15, "ax": 0.15, "ax_2": 0.3, "ay_2": 0.3, "yaw_rate_2": 0.01,
+        "wheel_speed": 0.1, "yaw_acceleration": 0.1, "vx_reference": 0.05})
+    initial_std: dict = field(default_factory=lambda: {
+        "yaw_rate": 0.05, "beta": 0.05, "vx": 2.0, "lateral_force": 1000.0, "wheel_speed": 1.0, "friction": 0.3})
+
+
+@dataclass(frozen=True)
+class Config:
+    path: Path
+    vehicle: VehicleParams
+    input_dbc: Path
+    output_dbc: Path
+    input_bus: BusConfig
+    output_bus: BusConfig
+    signals: dict  # canonical -> SignalSpec
+    messages: dict  # message name -> MessageChecks
+    estimator: EstimatorConfig
+
+    def with_buses(self, input_bus: BusConfig | None = None, output_bus: BusConfig | None = None) -> "Config":
+        return dataclasses.replace(self, input_bus=input_bus or self.input_bus, output_bus=output_bus or self.output_bus)
