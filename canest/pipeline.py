@@ -47,7 +47,7 @@ class Pipeline:
         estimates = self._ticks(t)
         if values:
             for name, value in values:
-                self.resampler.hold(name, value, t)
+                self.resampler.hold(name, value, t, name in self.decoder.last_saturated)
         return estimates
 
     def advance(self, t: float) -> list:

@@ -24,6 +24,7 @@ class Sample:
     stale: np.ndarray  # bool per input
     fresh: np.ndarray  # bool per input
     ages: np.ndarray  # s since each input's latest frame
+    saturated: np.ndarray  # bool per input: its latest sample sat at a limit of its DBC signal
 
 
 class Resampler:
@@ -34,17 +35,19 @@ class Resampler:
         self.values = np.zeros(len(self.names))
         self.stamps = np.full(len(self.names), -math.inf)
         self.fresh = np.zeros(len(self.names), dtype=bool)
+        self.saturated = np.zeros(len(self.names), dtype=bool)
 
-    def hold(self, name: str, value: float, t: float) -> None:
+    def hold(self, name: str, value: float, t: float, saturated: bool = False) -> None:
         i = self.index[name]
         self.values[i] = value
         self.stamps[i] = t
         self.fresh[i] = True
+        self.saturated[i] = saturated
 
     def sample(self, t: float) -> Sample:
         ages = t - self.stamps
         stale = ages > self.timeouts
-        sample = Sample(t, self.names, self.values.copy(), stale, self.fresh & ~stale, ages)
+        sample = Sample(t, self.names, self.values.copy(), stale, self.fresh & ~stale, ages, self.saturated.copy())
         self.fresh[:] = False
         return sample
 

@@ -1,8 +1,19 @@
-"""Accuracy of an estimate CSV against a truth CSV: RMSE and MAE per state.
+"""Accuracy and honesty of an estimate CSV against a truth CSV, per published state.
 
 Truth is interpolated linearly onto the estimate's tick times; only ticks
 inside the truth's time span and whose state is flagged valid are scored
 (``--all`` scores every tick). Angles are reported in degrees, speeds in m/s.
+
+Beside RMSE and MAE, what a consumer of the standard deviation and the
+validity bit needs to know (all over the scored ticks):
+
+- ``valid``: share of ticks in the truth's span flagged valid;
+- ``cov1``-``cov3``: share with ``|error| <= k std`` (a Gaussian's 68 / 95 / 99.7 %);
+- ``nees``: mean ``error^2 / std^2`` (1 when the std is honest);
+- ``vbw``, valid but wrong: share with ``|error| > 3 std`` and above :data:`WRONG_ABOVE`;
+- ``wrong_sign`` (yaw rate): ticks more than 2 deg/s off with the sign of the truth wrong.
+
+:func:`counts` are additive, so runs pool (:func:`pool`) before :func:`summarize`.
 """
 from __future__ import annotations
 
@@ -48,6 +59,12 @@ def read_table(path) -> dict:
     return table
 
 
+# "valid but wrong": more than 3 std off and more than this, in display units
+WRONG_ABOVE = {"vx": 0.5, "vy": 0.5, "beta": 1.0, "yaw_rate": 1.0, **{f"fy_{w}": 300.0 for w in WHEELS},
+               **{f"mu_{w}": 0.1 for w in WHEELS}}
+SIGN_MARGIN = 2.0  # deg/s
+
+
 @dataclass
 class Score:
     state: str
@@ -56,33 +73,87 @@ class Score:
     mae: float
     max_error: float
     samples: int
+    valid: float = math.nan  # share of ticks flagged valid
+    cov1: float = math.nan
+    cov2: float = math.nan
+    cov3: float = math.nan
+    nees: float = math.nan
+    vbw: float = math.nan
+    wrong_sign: int = 0
+
+
+def valid_mask(estimate: dict, state: str) -> np.ndarray:
+    """Per tick, whether the estimate flags ``state`` valid (every tick where the CSV has no bit for it)."""
+    if "valid" not in estimate or state not in VALID_BITS:
+        return np.ones(estimate["t"].size, dtype=bool)
+    return (estimate["valid"].astype(np.int64) >> VALID_BITS.index(state)) & 1 == 1
+
+
+def counts(estimate: dict, truth: dict, state: str, only_valid: bool = True, skip: float = 0.0) -> dict:
+    """Additive sums of one state on one run, in display units (pool runs with :func:`pool`)."""
+    _, factor = DISPLAY.get(state, ("", 1.0))
+    t = estimate["t"]
+    inside = (t >= truth["t"][0] + skip) & (t <= truth["t"][-1]) & np.isfinite(estimate[state])
+    use = inside & valid_mask(estimate, state) if only_valid else inside
+    error = np.abs(estimate[state][use] - np.interp(t[use], truth["t"], truth[state])) * factor
+    std_column = estimate.get(f"{state}_std")
+    std = std_column[use] * factor if std_column is not None else np.full(error.size, np.nan)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        nees = np.where(std > 0, (error / std) ** 2, np.inf)
+    sums = {"ticks": int(inside.sum()), "valid": int((inside & valid_mask(estimate, state)).sum()),
+            "n": int(error.size), "sq": float(np.sum(error**2)), "abs": float(np.sum(error)),
+            "max": float(error.max()) if error.size else math.nan,
+            "cov1": int(np.sum(error <= std)), "cov2": int(np.sum(error <= 2 * std)),
+            "cov3": int(np.sum(error <= 3 * std)), "nees": float(np.sum(nees)),
+            "wrong": int(np.sum((error > 3 * std) & (error > WRONG_ABOVE.get(state, 0.0)))), "sign": 0}
+    if state == "yaw_rate":
+        estimated = estimate[state][use]
+        true = np.interp(t[use], truth["t"], truth[state])
+        sums["sign"] = int(np.sum((error > SIGN_MARGIN) & (np.sign(estimated) != np.sign(true))))
+    return sums
+
+
+def pool(items) -> dict:
+    """The sums of several runs' :func:`counts` (the largest error for ``max``)."""
+    total = {}
+    for sums in items:
+        for key, value in sums.items():
+            if key == "max":
+                total[key] = value if key not in total or math.isnan(total[key]) else max(total[key], value)
+            else:
+                total[key] = total.get(key, 0) + value
+    return total
+
+
+def summarize(state: str, sums: dict) -> Score:
+    """Ratios of (pooled) sums."""
+    n = sums["n"]
+    share = (lambda x: x / n) if n else (lambda x: math.nan)
+    return Score(state, DISPLAY.get(state, ("", 1.0))[0], math.sqrt(share(sums["sq"])), share(sums["abs"]),
+                 sums["max"], n, sums["valid"] / sums["ticks"] if sums["ticks"] else math.nan,
+                 share(sums["cov1"]), share(sums["cov2"]), share(sums["cov3"]), share(sums["nees"]),
+                 share(sums["wrong"]), sums["sign"])
 
 
 def score(estimate: dict, truth: dict, states=None, only_valid: bool = True, skip: float = 0.0) -> list:
-    """RMSE/MAE per state; ``skip`` seconds at the start are ignored (filter convergence)."""
-    t = estimate["t"]
-    inside = (t >= truth["t"][0] + skip) & (t <= truth["t"][-1])
-    scores = []
-    for state in states or [s for s in DISPLAY if s in estimate and s in truth]:
-        unit, factor = DISPLAY.get(state, ("", 1.0))
-        use = inside & np.isfinite(estimate[state])
-        if only_valid and "valid" in estimate and state in VALID_BITS:
-            use &= (estimate["valid"].astype(int) >> VALID_BITS.index(state)) & 1 == 1
-        error = (estimate[state][use] - np.interp(t[use], truth["t"], truth[state])) * factor
-        if error.size == 0:
-            scores.append(Score(state, unit, math.nan, math.nan, math.nan, 0))
-            continue
-        scores.append(Score(state, unit, float(np.sqrt(np.mean(error**2))), float(np.mean(np.abs(error))),
-                            float(np.max(np.abs(error))), int(error.size)))
-    return scores
+    """A :class:`Score` per state; ``skip`` seconds at the start are ignored (filter convergence)."""
+    states = states or [s for s in DISPLAY if s in estimate and s in truth]
+    return [summarize(state, counts(estimate, truth, state, only_valid, skip)) for state in states]
 
 
 def format_table(scores, title: str = "") -> str:
     lines = [title] if title else []
-    lines.append(f"{'state':<10} {'unit':<6} {'RMSE':>10} {'MAE':>10} {'max':>10} {'ticks':>7}")
+    lines.append(f"{'state':<10} {'unit':<6} {'RMSE':>9} {'MAE':>9} {'max':>9} {'ticks':>6} {'valid':>6} "
+                 f"{'<=1std':>6} {'<=2std':>6} {'<=3std':>6} {'NEES':>8} {'wrong':>6}")
     for s in scores:
-        lines.append(f"{s.state:<10} {s.unit:<6} {s.rmse:>10.4f} {s.mae:>10.4f} {s.max_error:>10.4f} {s.samples:>7d}")
+        lines.append(f"{s.state:<10} {s.unit:<6} {s.rmse:>9.4f} {s.mae:>9.4f} {s.max_error:>9.4f} {s.samples:>6d} "
+                     f"{_percent(s.valid)} {_percent(s.cov1)} {_percent(s.cov2)} {_percent(s.cov3)} "
+                     f"{s.nees:>8.3g} {_percent(s.vbw)}")
     return "\n".join(lines)
+
+
+def _percent(share: float) -> str:
+    return f"{'-':>6}" if math.isnan(share) else f"{100 * share:>5.1f}%"
 
 
 def plot(estimate: dict, truth: dict, states, path) -> None:

@@ -20,6 +20,17 @@ from canest.settings import Config, MessageChecks
 from canest.codec.plausibility import SlewLimit
 
 
+def at_limit(signal, raw: float) -> bool:
+    """A raw value within half a quantum of a non-zero limit of its DBC range: saturated, not measured.
+
+    A sensor beyond its range sends the limit (a wheel speed above what the
+    signal carries, an accelerometer at full scale); that is a bound, not the
+    value. Zero is a physical value (standstill), never a saturation."""
+    half = abs(signal.scale) / 2.0
+    return any(limit is not None and limit != 0 and abs(raw - limit) <= half
+               for limit in (signal.minimum, signal.maximum))
+
+
 class _MessagePlan:
     """What to do with one mapped message: its signals, integrity checks and counter state."""
 
@@ -51,7 +62,9 @@ class InputDecoder:
     frames; a larger jump is rejected (``counter_sequence``) and the new
     value becomes the reference, so a sender that restarted is followed from
     its next frame on. Last, values that change faster than physics allows
-    are rejected (``implausible``, :mod:`canest.codec.plausibility`).
+    are rejected (``implausible``, :mod:`canest.codec.plausibility`). A value
+    at a limit of its DBC range is passed on but named in ``last_saturated``
+    (counted ``saturated_samples``): the estimator does not take it as a measurement.
     """
 
     def __init__(self, config: Config):
@@ -66,6 +79,7 @@ class InputDecoder:
         self.frame_of = {spec.canonical: fid for fid, plan in self.plans.items() for spec in plan.specs}
         self.plausible = SlewLimit(config.signals)
         self.counts = Counter()
+        self.last_saturated = set()  # canonical inputs of the last decoded frame that sat at a DBC limit
 
     def cycle_time(self, canonical: str) -> float:
         """Seconds between frames of the message carrying ``canonical`` (the DBC's, else ``DEFAULT_CYCLE_TIME``)."""
@@ -125,6 +139,7 @@ class InputDecoder:
                 if delta > 1:
                     self.counts["counter_jumps"] += 1
         out = []
+        self.last_saturated = set()
         for spec in plan.specs:
             if spec.signal not in values:
                 continue  # another multiplexer page of this message
@@ -135,6 +150,9 @@ class InputDecoder:
             if (signal.minimum is not None and raw < signal.minimum - 1e-9) or \
                     (signal.maximum is not None and raw > signal.maximum + 1e-9):
                 return self._reject("out_of_range")
+            if at_limit(signal, raw):
+                self.last_saturated.add(spec.canonical)
+                self.counts["saturated_samples"] += 1
             out.append((spec.canonical, spec.factor * raw + spec.offset))
         if not self.plausible.accept(out, msg.timestamp):
             return self._reject("implausible")

@@ -17,7 +17,7 @@ import can
 from canest.codec import integrity
 from canest.codec.dbc import clamp_to_signal, load_database
 from canest.codec.decode import InputDecoder
-from canest.estimation.estimate import Estimate
+from canest.estimation.estimate import CAN_VALID_BITS, Estimate
 from canest.settings import Config
 from canest.signals import WHEELS
 
@@ -43,6 +43,9 @@ OUTPUT_MESSAGES = {
                     **{f"Mu{_WHEEL_SIGNAL[w]}Observable": ("flag", f"mu_{w}_observable") for w in WHEELS}},
 }
 STATUS_MESSAGE = "CE_Status"
+CAUSE_MESSAGE = "CE_ValidityCause"
+CAUSE_SIGNALS = {"VxCause": "vx", "YawRateCause": "yaw_rate", "SideslipCause": "beta", "ForcesCause": "forces",
+                 "FrictionCause": "friction"}
 
 
 def integrity_signals(message):
@@ -80,7 +83,7 @@ class EstimateEncoder:
         self.database = load_database(dbc_path, "output.dbc")
         self.channel = channel
         self.senders = {name: _Sender(self.database.get_message_by_name(name))
-                        for name in (*OUTPUT_MESSAGES, STATUS_MESSAGE)}
+                        for name in (*OUTPUT_MESSAGES, STATUS_MESSAGE, CAUSE_MESSAGE)}
         status = self.senders[STATUS_MESSAGE].signals
         self.filter_ids = {str(v): k for k, v in status["FilterId"].choices.items()}
         self.mode_ids = {str(v): k for k, v in status["Mode"].choices.items()}
@@ -106,11 +109,13 @@ class EstimateEncoder:
         frames.append(status.frame({
             "FilterId": self.filter_ids.get(estimate.filter, 0),
             "Mode": self.mode_ids[estimate.mode],
-            "ValidFlags": estimate.valid_flags,
+            "ValidFlags": estimate.valid_flags & ((1 << CAN_VALID_BITS) - 1),
             "MissingInputs": estimate.missing_mask,
             "ResetCount": min(estimate.resets, 255),
             "InnovationNis": clamp_to_signal(status.signals["InnovationNis"], estimate.nis),
         }, estimate.t, self.channel))
+        frames.append(self.senders[CAUSE_MESSAGE].frame(
+            {signal: estimate.cause_code(group) for signal, group in CAUSE_SIGNALS.items()}, estimate.t, self.channel))
         return frames
 
 

@@ -4,14 +4,21 @@ Outputs, evaluation and batch read these without importing the estimator.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
-from canest.signals import INPUT_GROUPS
+from canest.signals import INPUT_GROUPS, WHEELS
 
 OUTPUT_STATES = ("vx", "vy", "beta", "yaw_rate")
-# Bit i of the published validity mask (CAN ``ValidFlags``, CSV ``valid``).
-VALID_BITS = ("vx", "vy", "beta", "yaw_rate", "forces", "friction", "friction_observable")
+# Bit i of the validity mask: bits 0-6 on CAN (``CE_Status.ValidFlags``), all of them in the CSV ``valid`` column
+# (per-wheel forces and frictions from bit 7, as the per-wheel ``..Valid`` signals on CAN).
+VALID_BITS = ("vx", "vy", "beta", "yaw_rate", "forces", "friction", "friction_observable",
+              *(f"fy_{w}" for w in WHEELS), *(f"mu_{w}" for w in WHEELS))
+CAN_VALID_BITS = 7  # how many of them CE_Status.ValidFlags carries
 MODES = ("initializing", "normal", "low_speed", "degraded", "no_input")
+# Why a validity bit is clear (index = the code of CE_ValidityCause; README "How far to trust the output").
+CAUSES = ("valid", "no_input", "initializing", "low_speed", "inconsistent", "saturated", "after_reset",
+          "not_excited", "at_bound", "uncertain", "model_regime")
+CAUSE_GROUPS = ("vx", "yaw_rate", "beta", "forces", "friction")  # the states and groups whose cause is published
 
 
 @dataclass
@@ -26,10 +33,16 @@ class Estimate:
     nis: float = 0.0
     missing: tuple = ()
     resets: int = 0
+    causes: dict = field(default_factory=dict)  # state or group -> why its bit is clear ("valid" when set)
 
     @property
     def valid_flags(self) -> int:
+        """The validity mask over :data:`VALID_BITS`."""
         return sum(1 << i for i, name in enumerate(VALID_BITS) if self.valid.get(name, False))
+
+    def cause_code(self, group: str) -> int:
+        """The published code of why ``group``'s bit is clear (no_input for a group the model does not estimate)."""
+        return CAUSES.index(self.causes.get(group, "no_input"))
 
     @property
     def missing_mask(self) -> int:

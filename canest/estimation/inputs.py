@@ -15,10 +15,15 @@ class TickInputs:
         self.stale = dict(zip(sample.names, sample.stale))
         self.fresh = dict(zip(sample.names, sample.fresh))
         self.ages = dict(zip(sample.names, sample.ages))
+        self.at_limit = dict(zip(sample.names, sample.saturated))
 
     def has(self, *names) -> bool:
-        """Every one of ``names`` is mapped and not stale."""
-        return all(name in self.values and not self.stale[name] for name in names)
+        """Every one of ``names`` is mapped, not stale and not saturated (a value at its DBC limit is no measurement)."""
+        return all(name in self.values and not self.stale[name] and not self.at_limit[name] for name in names)
+
+    def saturated(self, name: str) -> bool:
+        """The input's latest sample sat at a limit of its DBC signal (and is not stale)."""
+        return bool(self.at_limit.get(name, False)) and not self.stale[name]
 
     def any_fresh(self, *names) -> bool:
         return any(self.fresh.get(name, False) for name in names)

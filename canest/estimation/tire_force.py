@@ -12,6 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from canest.estimation.channels import rows_of
+from canest.estimation import validity
 from canest.estimation.core import Estimator
 from canest.estimation.inputs import WHEEL_SPEEDS, TickInputs
 from canest.models import tire_force
@@ -60,9 +61,8 @@ class TireForceEstimator(Estimator):
                                  self.vehicle.wheel_inertia, self.vehicle.wheel_radius)
         return np.array([self._road_wheel_angle(inputs), *accelerations(inputs), *fx])
 
-    def _update(self, inputs: TickInputs, u: np.ndarray, lateral_ok: bool, t: float) -> bool:
+    def _update(self, channels, inputs: TickInputs, u: np.ndarray, lateral_ok: bool, t: float) -> bool:
         """Non-DICI filters use the first IMU; ``dici-gfckf`` gives local filter j the rows of IMU j."""
-        channels = self._channels(inputs, t, lateral_ok)
         if not hasattr(self.filter, "sensor_sets"):
             return self._apply(channels, u, t, mask=SENSOR_SETS <= 1)
         local_masks = [channels.mask & ((SENSOR_SETS == 0) | (SENSOR_SETS == j + 1))
@@ -74,9 +74,13 @@ class TireForceEstimator(Estimator):
         self.filter.update_sets(given, u)
         return self._diverged(t)
 
-    def _extra_values(self, values: dict, valid: dict, std: np.ndarray, inputs: TickInputs, lateral_ok: bool) -> None:
-        ok = lateral_ok and inputs.has(*TORQUES, *WHEEL_SPEEDS)
+    def _extra_values(self, values: dict, valid: dict, causes: dict, std: np.ndarray, inputs: TickInputs,
+                      lateral_ok: bool) -> None:
+        """The forces are valid where sideslip is (they are judged by the same lateral channels) and torques are in."""
+        cause = causes["beta"] if causes["beta"] != "valid" or inputs.has(*TORQUES) else "no_input"
+        inflation = validity.inflation(self.consistency.ratio("beta"))
         for name, force, force_std in zip(LATERAL_FORCES, self.filter.x[tire_force.FY], std[tire_force.FY]):
-            values[name], values[f"{name}_std"] = force, force_std
-            valid[name] = ok
-        valid["forces"] = ok
+            values[name], values[f"{name}_std"] = force, force_std * inflation
+            valid[name] = cause == "valid"
+        valid["forces"] = cause == "valid"
+        causes["forces"] = cause

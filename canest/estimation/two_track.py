@@ -39,13 +39,11 @@ the single-track binding skips ay.
 """
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
+from canest.estimation import validity
 from canest.estimation.core import Estimator
 from canest.estimation.inputs import WHEEL_SPEEDS, TickInputs
-from canest.estimation.reference_speed import ReferenceSpeed
 from canest.estimation.tire_force import TORQUES, accelerations, torques
 from canest.models import two_track
 from canest.models.two_track import TwoTrackModel
@@ -65,9 +63,6 @@ class FrictionEstimator(Estimator):
         super().__init__(config, TwoTrackModel(config.vehicle, config.vehicle.tire))
         self.observable = np.zeros(len(FRICTIONS), dtype=bool)
         self.yaw_acceleration = WheelAcceleration(YAW_ACCELERATION_WINDOW)
-        self.wheel_acceleration = WheelAcceleration()
-        self.reference_speed = ReferenceSpeed(self.vehicle.wheel_radius, self.vehicle.tire.longitudinal_stiffness,
-                                              self.est.measurement_noise["vx_reference"])
         self.last_friction = None
         correlation = self.est.friction_correlation
         mixing = correlation * np.ones((4, 4)) + (1.0 - correlation) * np.eye(4)
@@ -80,7 +75,6 @@ class FrictionEstimator(Estimator):
             self.last_friction = self.filter.x[two_track.MU].copy()
         super().reset()
         self.yaw_acceleration.reset()
-        self.wheel_acceleration.reset()
 
     def _initial_state(self, inputs: TickInputs) -> np.ndarray:
         """Wheel speeds as measured; friction as before a reset, else at the tire's nominal value (dry)."""
@@ -102,20 +96,13 @@ class FrictionEstimator(Estimator):
             rate = self.yaw_acceleration.update(t, [inputs.values["yaw_rate"]])[0]
             if lateral_ok and len(self.yaw_acceleration.samples) == YAW_ACCELERATION_WINDOW:
                 derived["yaw_acceleration"] = (rate, self.est.measurement_noise["yaw_acceleration"], 0.0)
-        if inputs.has(*WHEEL_SPEEDS, "ax"):
-            speeds = np.array([inputs.values[name] for name in WHEEL_SPEEDS])
-            ax, ay = accelerations(inputs)
-            usage = torques(inputs) / (self.vehicle.wheel_radius * np.maximum(self.model.wheels.loads(ax, ay), 1.0))
-            beta, vx = self.filter.x[[two_track.BETA, two_track.VX]]
-            speed, std = self.reference_speed.update(
-                t, ax + inputs.current("yaw_rate") * vx * math.tan(beta), speeds, self.wheel_acceleration.update(t, speeds),
-                usage)
-            derived["vx_reference"] = (speed, std, 0.0)
+        reference = self._reference_speed(inputs, t)
+        if reference is not None:
+            derived["vx_reference"] = (*reference, 0.0)
         return derived
 
-    def _update(self, inputs: TickInputs, u: np.ndarray, lateral_ok: bool, t: float) -> bool:
+    def _update(self, channels, inputs: TickInputs, u: np.ndarray, lateral_ok: bool, t: float) -> bool:
         """Open or close the friction gate and set the one-sided ceiling, then update as every model does."""
-        channels = self._channels(inputs, t, lateral_ok)
         states = np.stack([self._plausibly_lower_friction(), self.filter.x])
         excited, at_limit = self.model.friction_sensitivity(states, u) >= self.est.friction_excitation
         self.observable = excited & lateral_ok & inputs.has(*TORQUES)
@@ -153,11 +140,23 @@ class FrictionEstimator(Estimator):
         x[two_track.MU] = np.maximum(x[two_track.MU] - LOWER_FRICTION_STDS * std, two_track.LOWEST_FRICTION)
         return x
 
-    def _extra_values(self, values: dict, valid: dict, std: np.ndarray, inputs: TickInputs, lateral_ok: bool) -> None:
+    def _extra_values(self, values: dict, valid: dict, causes: dict, std: np.ndarray, inputs: TickInputs,
+                      lateral_ok: bool) -> None:
+        """Per wheel: friction is valid once excitation made it certain (std below ``MU_VALID_STD``) and the
+        update has not pressed it against a bound of the physical range (the data then say only that the
+        model cannot explain them: the sideslip loses its bit too)."""
         frictions, friction_stds = self.filter.x[two_track.MU], std[two_track.MU]
-        for name, mu, mu_std, observable in zip(FRICTIONS, frictions, friction_stds, self.observable):
+        pressed = self.filter.parameters.pressed
+        wheel_causes = []
+        for name, mu, mu_std, observable, at_bound in zip(FRICTIONS, frictions, friction_stds, self.observable, pressed):
             values[name], values[f"{name}_std"] = mu, mu_std
-            valid[name] = bool(mu_std < MU_VALID_STD and mu < two_track.HIGHEST_FRICTION - MU_VALID_STD)
+            cause = "at_bound" if at_bound else "not_excited" if mu_std >= MU_VALID_STD else "valid"
+            valid[name] = cause == "valid"
             valid[f"{name}_observable"] = bool(observable)
+            wheel_causes.append(cause)
         valid["friction"] = any(valid[name] for name in FRICTIONS)
         valid["friction_observable"] = bool(self.observable.any())
+        causes["friction"] = "valid" if valid["friction"] else min(wheel_causes, key=validity.CAUSES.index)
+        if pressed.any() and causes["beta"] == "valid":
+            causes["beta"] = "at_bound"
+            valid["beta"] = valid["vy"] = False

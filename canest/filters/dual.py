@@ -87,7 +87,7 @@ class DoubleCubatureKalmanFilter(GaussianFilter):
         _, Pzz, Pxz = self.params.predicted_measurement(params_view, u)  # step 3
         at_mean = params_view.h(self.params.x[None, :], u)[0]
         self.params.correct(z - at_mean, Pzz, Pxz, R + state_spread, gain_mask=~self.parameters.frozen)
-        self.params.x = self.parameters.clip(self.params.x)
+        self.params.x, self.params.P = self.parameters.project(self.params.x, self.params.P)
         self.states.update(z, states_view, u, R)  # step 4
         self.y, self.S, self.K, self.nis = self.states.y, self.states.S, self.states.K, self.states.nis
         self._join()

@@ -40,4 +40,4 @@ class JointCubatureKalmanFilter(CubatureKalmanFilter):
         z_hat, Pzz, Pxz = self.predicted_measurement(measurement, u)
         self.correct(z - z_hat, Pzz, Pxz, R, gain_mask=self.parameters.gain_mask(self.x.size))
         block = self.parameters.index
-        self.x[block] = self.parameters.clip(self.x[block])
+        self.x[block], self.P = self.parameters.project(self.x[block], self.P)

@@ -4,10 +4,20 @@ Shared by the double CKF (:mod:`canest.filters.dual`) and the joint CKF
 (:mod:`canest.filters.joint`), which both estimate the last ``count`` entries of
 the state as random-walk parameters:
 
-* after each measurement update the parameters are clipped to ``bounds``
-  (the projection of the mean onto the physical range, e.g. friction 0.1-1.3)
-  and to ``ceiling``, a per-update upper limit the estimator may set (where
-  the data can only bound a parameter from below: :mod:`canest.estimation.bindings`);
+* after each measurement update a parameter whose mean left ``bounds`` (the
+  physical range, e.g. friction 0.1-1.3) is projected back as a truncated
+  Gaussian: mean and variance become those of the normal truncated to the
+  range (one-sided formulas with the scaled complementary error function,
+  stable far outside the range), and its row and column of P are scaled by
+  the ratio of the standard deviations (a congruence: P stays positive
+  definite, correlations are kept). Only violated bounds are enforced:
+  truncating every update a wide prior near a bound (0.9 +- 0.3 below 1.3)
+  would walk the mean into the range's middle, 0.05 per update. Clipping the mean alone left a friction on its
+  bound with the variance of a free estimate, flagged valid. ``pressed`` says
+  which parameters the update pushed within one standard deviation of a bound
+  (the estimator clears their validity). Then the mean is clipped to
+  ``ceiling``, a per-update upper limit the estimator may set (where the data
+  can only bound a parameter from below: :mod:`canest.estimation.two_track`);
 * parameters in ``frozen`` (set by the estimator: not observable this tick)
   get a zero gain, so they keep their value; the Joseph update keeps the
   covariance honest for any gain;
@@ -19,6 +29,9 @@ the state as random-walk parameters:
 from __future__ import annotations
 
 import numpy as np
+from scipy.special import erfcx
+
+SQRT_2_OVER_PI = np.sqrt(2.0 / np.pi)
 
 
 class ParameterBlock:
@@ -30,10 +43,24 @@ class ParameterBlock:
         self.variance_cap = np.diag(P0)[self.index].copy()
         self.frozen = np.zeros(count, dtype=bool)
         self.ceiling = np.full(count, np.inf)
+        self.pressed = np.zeros(count, dtype=bool)
 
-    def clip(self, values: np.ndarray) -> np.ndarray:
+    def project(self, values: np.ndarray, P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(values, P) with each parameter truncated to ``bounds``, then its mean clipped to ``ceiling``.
+
+        ``P``'s last entries are the parameters (the joint covariance, or the parameters' own)."""
+        count = self.frozen.size
+        std = np.sqrt(np.maximum(np.diag(P)[-count:], 1e-300))
         low, high = self.bounds
-        return np.clip(values, low, np.maximum(np.minimum(self.ceiling, high), low))
+        self.pressed = (values < low + std) | (values > high - std)
+        mean, new_std = values.astype(float), std
+        below, above = mean < low, mean > high
+        mean[below], new_std[below] = truncated(mean[below], std[below], low, 1.0)
+        mean[above], new_std[above] = truncated(mean[above], std[above], high, -1.0)
+        scale = np.ones(P.shape[0])
+        scale[-count:] = new_std / std
+        mean = np.clip(mean, low, np.maximum(np.minimum(self.ceiling, high), low))
+        return mean, P * np.outer(scale, scale)
 
     def gain_mask(self, size: int) -> np.ndarray:
         """Which of ``size`` trailing-aligned state entries may move: all but the frozen parameters."""
@@ -47,3 +74,18 @@ class ParameterBlock:
         scale = np.ones(P.shape[0])
         scale[-self.frozen.size:] = np.sqrt(np.minimum(1.0, ratio))
         return P * np.outer(scale, scale)
+
+
+def truncated(mean: np.ndarray, std: np.ndarray, bound: float, side: float) -> tuple[np.ndarray, np.ndarray]:
+    """Mean and std of N(mean, std^2) truncated to ``x >= bound`` (side 1) or ``x <= bound`` (side -1).
+
+    With ``a = side (bound - mean) / std`` and the inverse Mills ratio
+    ``l = phi(a) / (1 - Phi(a)) = sqrt(2/pi) / erfcx(a / sqrt(2))``:
+    mean ``+ side std l``, variance ``std^2 (1 + a l - l^2)``.
+    """
+    if not np.isfinite(bound):
+        return mean, std
+    a = side * (bound - mean) / std
+    ratio = SQRT_2_OVER_PI / erfcx(a / np.sqrt(2.0))
+    variance_factor = np.maximum(1.0 + a * ratio - ratio**2, 1e-12)
+    return mean + side * std * ratio, std * np.sqrt(variance_factor)

@@ -27,6 +27,22 @@ grows beyond what R explains:
 so consistent innovations see the wide kernel ``sigma_0`` (weight 0.95 at one
 standard deviation for sigma_0 = 3, close to the Kalman filter) and an
 outlier both a narrow kernel and a large residual.
+
+Two departures keep a healthy channel from being silently dropped (measured
+on the simulator's 80 km/h sine on friction 0.35, where the paper's form
+published a yaw rate of the wrong sign, flagged valid, for seconds):
+
+- the residual is whitened by the innovation covariance ``Pzz = Zc Zc^T + R``
+  (prior spread and noise), not by ``S_R`` alone: when the prior is
+  uncertain a large innovation is what a healthy sensor shows, and eq 30's
+  whitening by R alone gave a 1.7 deg/s gyro innovation the weight 1e-8, so
+  the gyro was ignored on 79 % of updates and the filter ran open loop;
+- the kernel weight is at least ``min_weight`` (default 0.04: a channel's
+  noise is inflated at most 25 times), a bounded reweighting, never a zero gain.
+
+``nis`` is the innovation's NIS under the configured R (eq 40's ``eta``), not
+under the reweighted one, so the estimator's divergence test sees what the
+configured noise explains.
 """
 from __future__ import annotations
 
@@ -35,15 +51,19 @@ import numpy as np
 from canest.filters.base import Measurement
 from canest.filters.sqrt import SquareRootCubatureKalmanFilter
 
-MIN_WEIGHT = 1e-8
+MIN_WEIGHT = 0.04  # at most a 25-fold noise inflation per channel
 
 
 class MaximumCorrentropySCKF(SquareRootCubatureKalmanFilter):
     name = "mcsckf"
 
     def __init__(self, x0, P0, factorization: str = "cholesky", kernel_width: float = 3.0,
-                 min_kernel_width: float = 1.0, max_iterations: int = 5, tol: float = 1e-6):
+                 min_kernel_width: float = 1.0, max_iterations: int = 5, tol: float = 1e-6,
+                 min_weight: float = MIN_WEIGHT):
         super().__init__(x0, P0)
+        if not 0.0 < min_weight <= 1.0:
+            raise ValueError(f"min_weight must be in (0, 1], got {min_weight}")
+        self.min_weight = min_weight
         self.sigma0 = kernel_width
         self.sigma_min = min_kernel_width
         self.max_iterations = max_iterations
@@ -62,11 +82,12 @@ class MaximumCorrentropySCKF(SquareRootCubatureKalmanFilter):
         eta = float(y @ np.linalg.solve(Pzz, y))
         sigma = self.kernel_width(eta, y.size)
         H = np.linalg.solve(self.P, Xc @ Zc.T).T
+        whitening = np.linalg.cholesky(Pzz)
         prior = self.x
         x_t = prior
         for self.iterations in range(1, self.max_iterations + 1):
-            e = np.linalg.solve(sqrt_R, y - H @ (x_t - prior))
-            weights = np.maximum(np.exp(-e**2 / (2.0 * sigma**2)), MIN_WEIGHT)
+            e = np.linalg.solve(whitening, y - H @ (x_t - prior))
+            weights = np.maximum(np.exp(-e**2 / (2.0 * sigma**2)), self.min_weight)
             sqrt_R_tilde = sqrt_R / np.sqrt(weights)  # columns scaled: S_R C^-1/2
             Szz = self._innovation_root(Zc, sqrt_R_tilde)
             K = self._gain(Szz, Xc @ Zc.T)
@@ -77,3 +98,4 @@ class MaximumCorrentropySCKF(SquareRootCubatureKalmanFilter):
                 break
         self.kernel_weights = weights
         self._correct(y, Xc, Zc, sqrt_R_tilde)
+        self.nis = eta

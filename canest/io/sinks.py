@@ -19,6 +19,8 @@ import csv
 
 import can
 
+from canest.estimation.estimate import CAUSE_GROUPS
+
 
 class Sink:
     def publish(self, estimates: list) -> None:
@@ -39,9 +41,11 @@ class Sink:
 
 
 class CsvSink(Sink):
-    """One row per tick: ``t``, the states, their ``_std`` columns, ``valid`` (bit mask) and ``mode``.
+    """One row per tick: ``t``, the states, their ``_std`` columns, ``valid`` (bit mask), ``mode`` and
+    ``why_vx``, ``why_yaw_rate``, ``why_beta``, ``why_forces``, ``why_friction`` (why a bit is clear).
 
-    ``valid`` bits: 0 vx, 1 vy, 2 beta, 3 yaw rate, 4 lateral forces, 5 friction, 6 friction observable now.
+    ``valid`` bits: 0 vx, 1 vy, 2 beta, 3 yaw rate, 4 lateral forces, 5 friction, 6 friction observable now,
+    7-10 lateral force fl, fr, rl, rr, 11-14 friction fl, fr, rl, rr (``canest.estimation.estimate.VALID_BITS``).
     """
 
     def __init__(self, path):
@@ -53,9 +57,9 @@ class CsvSink(Sink):
         if self.columns is None:
             states = [k for k in estimate.values if not k.endswith("_std")]
             self.columns = states + [f"{k}_std" for k in states]
-            self.writer.writerow(["t", *self.columns, "valid", "mode"])
+            self.writer.writerow(["t", *self.columns, "valid", "mode", *(f"why_{g}" for g in CAUSE_GROUPS)])
         self.writer.writerow([f"{estimate.t:.6f}", *(f"{estimate.values[c]:.9g}" for c in self.columns),
-                              estimate.valid_flags, estimate.mode])
+                              estimate.valid_flags, estimate.mode, *(estimate.causes.get(g, "") for g in CAUSE_GROUPS)])
 
     def close(self) -> None:
         self.handle.close()

@@ -59,6 +59,7 @@ class SingleTrackModel:
     state_names = STATE_NAMES
     measurement_names = MEASUREMENT_NAMES
     input_parameter = 2  # u[2]: the scale theta of both cornering stiffnesses (a dual filter estimates it)
+    linear_tires = True  # no tire saturation: the published sideslip std adds the degressive stiffness error
 
     def __init__(self, vehicle: VehicleParams):
         self.vehicle = vehicle

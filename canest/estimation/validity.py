@@ -1,0 +1,209 @@
+"""Validity by consistency, and published standard deviations that cover the model's error.
+
+A validity bit means "consistent with what the car measures, within the
+published std", never merely "inputs present". Each tick, before the
+measurement update, every usable channel's innovation at the filter's prior
+is normalized by what the *configured* noise and the prior spread explain:
+
+    d_c = (z_c - h_c(x-))^2 / ((H P- H^T)_cc + R_c)          (R_c nominal, never adapted or reweighted)
+
+A consistent estimator gives d_c about 1 on average. :class:`Consistency`
+keeps the last ``WINDOW`` values per channel; a state is *inconsistent* when
+the mean over the channels that observe it exceeds ``INCONSISTENT`` (a
+generous bound: coloured road noise and model error raise the mean of a
+healthy filter to 2-3; a yaw rate of the wrong sign gives thousands at once).
+A gyro that disagrees with the published yaw rate clears the yaw-rate bit
+whatever the filter did with the gyro (the maximum-correntropy and adaptive
+filters can reweight a channel to silence): the test never sees the filter's
+own R.
+
+Published standard deviations get two terms beyond the filter's covariance:
+
+- the consistency ratio: where a state's channels show ``mean d = k > 1``,
+  the prior spread explains only ``1/k`` of what is measured, so the state's
+  standard deviation is scaled by ``sqrt(k)`` (innovation-driven, as a
+  covariance-matching adaptive filter would scale Q, but on the published
+  value only, so every filter's estimate stays what its paper gives);
+- the sideslip's model error: a rear cornering stiffness off by a relative
+  ``e`` moves the steady-state sideslip by ``e m a |ay| / (L C_r)`` (rear
+  slip angle ``alpha_r = F_yr / C_r`` with ``F_yr = m ay a / L``), added in
+  quadrature. A user's stiffness is uncertain by ``e_0``
+  (:data:`CORNERING_STIFFNESS_UNCERTAINTY`); a model with linear tires adds
+  ``e_2 (ay / g)^2``, because every tire's secant stiffness falls with the
+  square of its slip at first (the cubic term of any tire curve:
+  ``sin(C atan(B a)) ~ C B a - k a^3``): ``e_2`` (:data:`DEGRESSIVE_STIFFNESS`)
+  makes ``e`` 0.6 at 0.65 g, the error of the simulator's Magic Formula
+  tires on dry road (sideslip 1.8 deg off at 6.3 m/s^2). Models with a tire
+  curve (tire force, two track) have that term in their dynamics.
+
+Sideslip also needs the model inside its valid regime. A model with fixed
+tire friction (the single-track model's linear tires, the tire-force
+model's nominal friction) explains a saturated car by a wrong sideslip with
+small innovations ("consistent but wrong"). As an ESC does, :class:`LinearRegime`
+compares the gyro with the linear steady-state yaw rate of the steering,
+``r_ref = vx delta / (L + K_us vx^2)`` (understeer gradient
+``K_us = m (b C_r - a C_f) / (L C_f C_r)``), lagged by the yaw response
+``REGIME_LAG``: beyond ``REGIME_TOLERANCE`` (absolute plus relative) the tires
+saturate and the sideslip is ``model_regime``.
+
+And sideslip must move as the car says it moves: over the last
+``KINEMATIC_WINDOW`` s the model's sideslip change must agree with the
+kinematic one, the integral of ``ay / vx - r`` (gyro and accelerometer
+only, no model; biases drift it by ~0.1 deg/s, so a short window), within
+``KINEMATIC_TOLERANCE`` (absolute plus relative) (:class:`KinematicCheck`).
+A car sliding into a slow spin on low friction keeps small innovations while
+the model's sideslip stays near zero; the kinematic sideslip sees the slide.
+
+A state that failed a test stays invalid for ``HOLD`` s after the test last
+failed (:class:`Holds`): the innovations of a model out of its regime come
+in bursts, and a bit that flickers back between them is not a promise.
+
+Why a bit is clear is published too (:data:`CAUSES`, CAN ``CE_ValidityCause``).
+"""
+from __future__ import annotations
+
+import math
+from collections import deque
+
+import numpy as np
+
+
+from canest.estimation.estimate import CAUSE_GROUPS as GROUPS, CAUSES
+
+__all__ = ["CAUSES", "GROUPS", "Consistency", "Holds", "KinematicCheck", "LinearRegime", "inflation", "judge", "normalized_innovations",
+           "sideslip_model_std"]
+
+WINDOW = 50  # channel samples
+MIN_SAMPLES = 10  # before this many samples a channel's mean is not judged
+INCONSISTENT = 9.0  # windowed mean of d above which a state is inconsistent with what is measured
+CORNERING_STIFFNESS_UNCERTAINTY = 0.3  # relative (1 std) error of a user's cornering stiffness
+DEGRESSIVE_STIFFNESS = 0.7  # growth of that error with (ay / g)^2: the tire curve's first nonlinear term
+GRAVITY = 9.81
+VX_VALID_STD = 0.5  # m/s: a published vx less certain than this is "uncertain"
+HOLD = 1.0  # s a failed test keeps a state invalid
+HELD_CAUSES = ("inconsistent", "model_regime", "at_bound", "after_reset")
+REGIME_LAG = 0.15  # s, first-order lag of the steady-state yaw rate (a passenger car's yaw response)
+REGIME_TOLERANCE = (0.035, 0.2)  # rad/s plus a share of the reference: ESC's yaw-rate deviation band
+KINEMATIC_WINDOW = 0.5  # s
+KINEMATIC_TOLERANCE = (math.radians(0.5), 0.25)  # rad plus a share of the kinematic change
+# The channels that observe each published state (any model; a model without the channel just lacks it).
+OBSERVED_BY = {
+    "yaw_rate": ("yaw_rate", "yaw_rate_2"),
+    "vx": ("vx_wheel", "vx_reference"),
+    "beta": ("ay", "ay_2", "yaw_rate", "yaw_rate_2", "yaw_acceleration"),
+}
+
+
+class Consistency:
+    """Per measurement channel, the last ``WINDOW`` normalized innovations squared under the configured noise."""
+
+    def __init__(self, names):
+        self.names = tuple(names)
+        self.windows = {name: deque(maxlen=WINDOW) for name in self.names}
+
+    def reset(self) -> None:
+        for window in self.windows.values():
+            window.clear()
+
+    def push(self, rows, d: np.ndarray) -> None:
+        for row, value in zip(rows, d):
+            self.windows[self.names[row]].append(float(value))
+
+    def ratio(self, state: str) -> float:
+        """The largest windowed mean of d over the channels observing ``state`` (nan: none judged yet)."""
+        means = [sum(w) / len(w) for name in OBSERVED_BY[state] if len(w := self.windows.get(name, ())) >= MIN_SAMPLES]
+        return max(means) if means else math.nan
+
+
+def normalized_innovations(measurement, x_prior, P_prior, u, z, nominal_std) -> np.ndarray:
+    """``d`` per row: innovation squared over the prior spread plus the configured variance."""
+    predicted = measurement.h(x_prior[None, :], u)[0]
+    H = measurement.jacobian(x_prior, u)
+    spread = np.einsum("ij,jk,ik->i", H, P_prior, H)
+    return (z - predicted) ** 2 / (np.maximum(spread, 0.0) + nominal_std**2)
+
+
+def judge(present: bool, saturated: bool, ratio: float) -> str:
+    """The cause of a measured state: a saturated input, no input, inconsistent channels, or valid."""
+    if saturated:
+        return "saturated"
+    if not present:
+        return "no_input"
+    if ratio > INCONSISTENT:
+        return "inconsistent"
+    return "valid"
+
+
+def inflation(ratio: float) -> float:
+    """The factor on a published std from its channels' consistency ratio (never below 1)."""
+    return math.sqrt(ratio) if ratio > 1.0 else 1.0
+
+
+def sideslip_model_std(vehicle, ay: float, linear_tires: bool) -> float:
+    """Steady-state sideslip error (rad) of a rear cornering stiffness off by its relative uncertainty at ``ay``."""
+    uncertainty = CORNERING_STIFFNESS_UNCERTAINTY + (DEGRESSIVE_STIFFNESS * (ay / GRAVITY) ** 2 if linear_tires else 0.0)
+    return uncertainty * vehicle.mass * vehicle.cg_to_front * abs(ay) / (vehicle.wheelbase * vehicle.cornering_stiffness_rear)
+
+
+class LinearRegime:
+    """Whether the measured yaw rate follows the linear steady-state yaw rate of the steering (tires not saturated)."""
+
+    def __init__(self, vehicle, dt: float):
+        cf, cr = vehicle.cornering_stiffness_front, vehicle.cornering_stiffness_rear
+        self.wheelbase = vehicle.wheelbase
+        self.understeer = vehicle.mass * (vehicle.cg_to_rear * cr - vehicle.cg_to_front * cf) / (
+            vehicle.wheelbase * cf * cr)
+        self.blend = dt / (REGIME_LAG + dt)
+        self.reference = None
+
+    def reset(self) -> None:
+        self.reference = None
+
+    def inside(self, delta: float, vx: float, yaw_rate: float) -> bool:
+        steady = vx * delta / max(self.wheelbase + self.understeer * vx * vx, 0.1 * self.wheelbase)
+        self.reference = steady if self.reference is None else self.reference + self.blend * (steady - self.reference)
+        absolute, relative = REGIME_TOLERANCE
+        return abs(yaw_rate - self.reference) <= absolute + relative * abs(self.reference)
+
+
+class Holds:
+    """Keep a state invalid for ``HOLD`` s after a test of :data:`HELD_CAUSES` last failed, with that cause."""
+
+    def __init__(self):
+        self.until = {}
+        self.cause = {}
+
+    def reset(self) -> None:
+        self.until.clear()
+        self.cause.clear()
+
+    def apply(self, state: str, cause: str, t: float) -> str:
+        if cause in HELD_CAUSES:
+            self.until[state], self.cause[state] = t + HOLD, cause
+            return cause
+        if cause == "valid" and t < self.until.get(state, -math.inf):
+            return self.cause[state]
+        return cause
+
+
+class KinematicCheck:
+    """Whether the model's sideslip changed as ``integral(ay / vx - r)`` did over the last ``KINEMATIC_WINDOW`` s."""
+
+    def __init__(self, dt: float):
+        self.dt = dt
+        self.history = deque(maxlen=max(2, int(round(KINEMATIC_WINDOW / dt)) + 1))
+        self.kinematic = 0.0
+
+    def reset(self) -> None:
+        self.history.clear()
+        self.kinematic = 0.0
+
+    def inside(self, beta: float, ay: float, yaw_rate: float, vx: float) -> bool:
+        self.kinematic += (ay / vx - yaw_rate) * self.dt
+        self.history.append((beta, self.kinematic))
+        if len(self.history) < self.history.maxlen:
+            return True
+        (beta_then, kinematic_then), (beta_now, kinematic_now) = self.history[0], self.history[-1]
+        change = kinematic_now - kinematic_then
+        absolute, relative = KINEMATIC_TOLERANCE
+        return abs((beta_now - beta_then) - change) <= absolute + relative * abs(change)

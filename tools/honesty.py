@@ -1,0 +1,182 @@
+#!/usr/bin/env python3
+"""Is what canest publishes honest? Accuracy against the published std and validity bits, over a grid.
+
+    python tools/honesty.py --filters ckf,jckf                    # 5 maneuvers x mu 0.35, 0.85 x 2 seeds
+    python tools/honesty.py --small --filters all                 # 2 maneuvers x 2 frictions x 1 seed, 4 s each
+    python tools/honesty.py --filters all --seeds 3 --json > honesty.json
+
+For every case of maneuvers x speeds x frictions x noise seeds it simulates
+one drive (cached in ``--workdir``), replays it with every filter (each on
+the model the catalog gives it, as ``canest compare`` does) and pools, per
+filter and published state (vx, yaw rate, sideslip, and forces and frictions
+where estimated), the sums of :func:`canest.apps.evaluate.counts`: RMSE of the
+valid ticks, share valid, coverage of +-1/2/3 std, mean NEES, the "valid but
+wrong" share and yaw rates of the wrong sign (README "How far to trust the
+output" says what each means and the targets).
+"""
+from __future__ import annotations
+
+import argparse
+import concurrent.futures
+import dataclasses
+import hashlib
+import json
+import math
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from canest.apps.compare import with_filter  # noqa: E402
+from canest.apps.evaluate import DISPLAY, counts, pool, read_table, summarize  # noqa: E402
+from canest.apps.replay import replay  # noqa: E402
+from canest.config import DEFAULT_CONFIG, load_config  # noqa: E402
+from canest.filters import FILTERS  # noqa: E402
+from canest.sim.simulate import simulate  # noqa: E402
+
+SKIP = 0.5  # s of filter convergence left out, as canest evaluate
+SMALL = {"maneuvers": "sine,step", "mu": "0.35,0.85", "seeds": 1, "duration": 4.0}
+STATES = [s for s in DISPLAY if s != "vy"]
+
+
+@dataclasses.dataclass(frozen=True)
+class Case:
+    maneuver: str
+    speed: float  # km/h
+    mu: float
+    seed: int
+    duration: float | None = None  # s; None: the maneuver's own
+
+    @property
+    def key(self) -> str:
+        length = f"-{self.duration:g}s" if self.duration else ""
+        return f"{self.maneuver}-{self.speed:g}kmh-mu{self.mu:g}-s{self.seed}{length}"
+
+
+def drive(config, case: Case, workdir: Path):
+    """(log, truth CSV) of a case, simulated once; None if the plant leaves its valid range (a spin to rest)."""
+    log, truth = workdir / f"{case.key}.log", workdir / f"{case.key}.truth.csv"
+    if not truth.exists():
+        try:
+            sim = simulate(config, case.maneuver, case.speed, case.mu, seed=case.seed, duration=case.duration)
+        except RuntimeError:
+            return None
+        sim.write_log(log)
+        sim.write_truth(f"{truth}.tmp")
+        Path(f"{truth}.tmp").rename(truth)
+    return log, truth
+
+
+def table_of(estimates) -> dict:
+    """Estimates as the columns of a CSV (t, states, _std, valid)."""
+    table = {"t": np.array([e.t for e in estimates]), "valid": np.array([e.valid_flags for e in estimates])}
+    for name in estimates[-1].values:
+        table[name] = np.array([e.values[name] for e in estimates])
+    return table
+
+
+def run_case(config_path, filters, case: Case, workdir: Path) -> dict:
+    """{filter: {state: sums}} of one case (empty if the drive could not be simulated), and seconds per filter."""
+    config = load_config(config_path)
+    paths = drive(config, case, workdir)
+    if paths is None:
+        return {"case": case, "failed": True}
+    truth = read_table(paths[1])
+    result = {"case": case, "sums": {}, "seconds": {}, "resets": {}}
+    for name in filters:
+        estimates = []
+        started = time.perf_counter()
+        summary = replay(with_filter(config, name), paths[0], progress=False, on_estimate=estimates.append)
+        result["seconds"][name] = time.perf_counter() - started
+        result["resets"][name] = summary.get("resets", 0)
+        table = table_of(estimates)
+        result["sums"][name] = {s: counts(table, truth, s, skip=SKIP) for s in STATES if s in table and s in truth}
+    return result
+
+
+def grid(config_path, filters, cases, workdir: Path, jobs: int = 1, report=print) -> list:
+    """Every case's result (cases run ``jobs`` at a time in separate processes)."""
+    workdir.mkdir(parents=True, exist_ok=True)
+    with concurrent.futures.ProcessPoolExecutor(max(1, jobs)) as executor:
+        futures = [executor.submit(run_case, config_path, filters, case, workdir) for case in cases]
+        results = []
+        for future in concurrent.futures.as_completed(futures):
+            results.append(future.result())
+            report(f"{len(results)}/{len(cases)} {results[-1]['case'].key}")
+    return sorted(results, key=lambda r: r["case"].key)
+
+
+def pooled(results, filters) -> dict:
+    """{filter: {state: Score}} over every simulated case."""
+    out = {}
+    for name in filters:
+        runs = [r["sums"][name] for r in results if not r.get("failed")]
+        out[name] = {s: summarize(s, pool(run[s] for run in runs if s in run)) for s in STATES
+                     if any(s in run for run in runs)}
+    return out
+
+
+def markdown(scores: dict) -> str:
+    lines = ["| filter | state | unit | RMSE | valid | <=1 std | <=2 std | <=3 std | NEES | valid but wrong | wrong sign |",
+             "|---|---|---|---|---|---|---|---|---|---|---|"]
+    for name, states in scores.items():
+        for s in states.values():
+            lines.append(f"| {name} | {s.state} | {s.unit} | {s.rmse:.3g} | {_pct(s.valid)} | {_pct(s.cov1)} | "
+                         f"{_pct(s.cov2)} | {_pct(s.cov3)} | {s.nees:.3g} | {_pct(s.vbw)} | "
+                         f"{s.wrong_sign if s.state == 'yaw_rate' else ''} |")
+    return "\n".join(lines)
+
+
+def _pct(share: float) -> str:
+    return "-" if math.isnan(share) else f"{100 * share:.1f} %"
+
+
+def cases_of(args) -> list:
+    split = (lambda text: [p.strip() for p in str(text).split(",") if p.strip()])
+    return [Case(m, float(v), float(mu), seed, args.duration) for m in split(args.maneuvers)
+            for v in split(args.speed) for mu in split(args.mu) for seed in range(args.seeds)]
+
+
+def parse_args(argv=None):
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--filters", default="all", help="comma list or 'all' (default all)")
+    p.add_argument("--maneuvers", default="dlc,sine,slalom,step,launch", help="comma list (default all five)")
+    p.add_argument("--speed", default="80", help="km/h, comma list (default 80)")
+    p.add_argument("--mu", default="0.35,0.85", help="road frictions, comma list (default 0.35,0.85)")
+    p.add_argument("--seeds", type=int, default=2, help="noise seeds 0..N-1 per case (default 2)")
+    p.add_argument("--duration", type=float, help="seconds per drive (default: each maneuver's own)")
+    p.add_argument("--config", default=str(DEFAULT_CONFIG), help="vehicle config (default: the built-in one)")
+    p.add_argument("--workdir", default="honesty-work", help="cache of simulated drives (default ./honesty-work)")
+    p.add_argument("--jobs", type=int, default=1, help="cases in parallel processes (default 1)")
+    p.add_argument("--json", action="store_true", help="print JSON instead of the markdown table")
+    p.add_argument("--small", action="store_true", help="quick subset: sine, step; mu 0.35, 0.85; 1 seed; 4 s")
+    args = p.parse_args(argv)
+    if args.small:
+        args.maneuvers, args.mu, args.seeds, args.duration = (SMALL[k] for k in ("maneuvers", "mu", "seeds", "duration"))
+    return args
+
+
+def main(argv=None) -> int:
+    args = parse_args(argv)
+    filters = list(FILTERS) if args.filters == "all" else [f.strip() for f in args.filters.split(",")]
+    config = Path(args.config).resolve()
+    workdir = Path(args.workdir) / hashlib.sha1(config.read_bytes()).hexdigest()[:8]
+    cases = cases_of(args)
+    started = time.perf_counter()
+    results = grid(config, filters, cases, workdir, args.jobs, report=lambda text: print(text, file=sys.stderr))
+    scores = pooled(results, filters)
+    failed = [r["case"].key for r in results if r.get("failed")]
+    if args.json:
+        print(json.dumps({name: {s: dataclasses.asdict(score) for s, score in states.items()}
+                          for name, states in scores.items()}, indent=1))
+    else:
+        print(f"{len(cases) - len(failed)} cases x {len(filters)} filters in {time.perf_counter() - started:.0f} s"
+              + (f"; not simulated (the plant spun to rest): {', '.join(failed)}" if failed else ""))
+        print(markdown(scores))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
