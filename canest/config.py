@@ -64,7 +64,7 @@ def _vehicle(doc: Document) -> VehicleParams:
     return VehicleParams(name=doc.text(("vehicle",), section, "name", doc.path.stem), tire=_tire(doc), **values)
 
 
-def bus_keywords(interface: str) -> dict | None:
+def _bus_keywords(interface: str) -> dict | None:
     """The keywords (with defaults) python-can's bus class of ``interface`` names, if it ignores all others.
 
     None for the other interfaces: their drivers take keywords of their own
@@ -80,7 +80,7 @@ def bus_keywords(interface: str) -> dict | None:
 
 def _bus_options(doc: Document, key_path: tuple, interface: str) -> dict:
     options = doc.section(key_path, required=False)
-    keywords = bus_keywords(interface)
+    keywords = _bus_keywords(interface)
     for key, value in options.items():
         if key in SET_BY_CANEST:
             raise doc.error(key_path + (key,), "set by canest, not an option (interface and channel go one level up)")
@@ -110,6 +110,8 @@ def _dbc_path(doc: Document, key_path: tuple) -> Path:
     given = doc.text(key_path[:-1], doc.section(key_path[:-1]), key_path[-1])
     if given is None:
         raise doc.error(key_path, "missing DBC path")
+    if "\0" in given:
+        raise doc.error(key_path, f"a path cannot hold a NUL character, got {given!r}")
     builtin = sorted(p.name for p in BUILTIN_DIR.glob("*.dbc"))
     if given.startswith(BUILTIN_PREFIX):
         name = given[len(BUILTIN_PREFIX):]

@@ -274,6 +274,8 @@ def test_a_missing_dbc_is_an_error_not_a_silent_built_in(tmp_path):
     path = write_variant(tmp_path, lambda d: d["input"].update(dbc="../nowhere/canest_vehicle.dbc"))
     assert re.search(r":\d+: input\.dbc: DBC file not found: .*/nowhere/canest_vehicle\.dbc "
                      r"\(canest's own is 'builtin:canest_vehicle\.dbc'\)$", error_of(path))
+    path = write_variant(tmp_path, lambda d: d["input"].update(dbc="../dbc/canest\0vehicle.dbc"))
+    assert error_of(path).endswith("input.dbc: a path cannot hold a NUL character, got '../dbc/canest\\x00vehicle.dbc'")
     path = write_variant(tmp_path, lambda d: d["input"].update(dbc="builtin:canest_vehicel.dbc"))
     assert error_of(path).endswith("input.dbc: no built-in DBC 'canest_vehicel.dbc'; built in: "
                                    "builtin:canest_estimates.dbc, builtin:canest_vehicle.dbc")

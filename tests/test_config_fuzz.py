@@ -13,7 +13,8 @@ from tests.test_config import write_variant
 
 FUZZ = settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 
-scalars = st.one_of(st.none(), st.booleans(), st.integers(), st.floats(), st.text(max_size=20))
+PATHS = ["", ".", "/", "\0", "builtin:", "builtin:canest_vehicle.dbc", "../dbc/canest_vehicle.dbc", "car.yaml"]
+scalars = st.one_of(st.none(), st.booleans(), st.integers(), st.floats(), st.text(max_size=20), st.sampled_from(PATHS))
 values = st.recursive(scalars, lambda inner: st.one_of(st.lists(inner, max_size=3),
                                                        st.dictionaries(st.text(max_size=10), inner, max_size=3)),
                       max_leaves=8)
