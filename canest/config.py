@@ -2,70 +2,128 @@
 
 Every error is a :class:`ConfigError` whose text names the file, the line and
 the key (``configs/ev.yaml:42: input.signals.ax.signal: ...``) so a user can
-fix it without reading code. Paths inside a config are relative to the config.
+fix it without reading code. Nothing is accepted silently: an unknown key is
+an error naming the nearest valid one, every number must lie in its physical
+range (:mod:`canest.limits`), a DBC path must exist (canest's own DBCs are
+named ``builtin:NAME``), and each mapped signal must decode from a frame ID
+no other message of its DBC shares. Paths inside a config are relative to the
+config.
 """
 from __future__ import annotations
 
 import dataclasses
+import importlib
+import inspect
+import math
 from pathlib import Path
 
 import numpy as np
+from can.interfaces import BACKENDS, VALID_INTERFACES
 
+from canest import limits
 from canest import signals as sig
-from canest.codec.dbc import load_database
+from canest.codec.dbc import clamp_to_signal, load_database
 from canest.errors import ConfigError
 from canest.estimation import catalog
 from canest.filters import FACTORIZATIONS, FILTERS, make_filter
 from canest.params import TireModelParams, VehicleParams
 from canest.settings import BusConfig, Config, EstimatorConfig, MessageChecks, SignalSpec
-from canest.yamldoc import Document
+from canest.yamldoc import Document, suggestion
 
 BUILTIN_DIR = Path(__file__).resolve().parent / "data"
+BUILTIN_PREFIX = "builtin:"
 DEFAULT_CONFIG = BUILTIN_DIR / "dici_ev.yaml"
-__all__ = ["BUILTIN_DIR", "DEFAULT_CONFIG", "ConfigError", "load_config"]
+__all__ = ["BUILTIN_DIR", "BUILTIN_PREFIX", "DEFAULT_CONFIG", "ConfigError", "load_config"]
 
-
-VEHICLE_FIELDS = [f.name for f in dataclasses.fields(VehicleParams) if f.name not in ("name", "tire")]
-TIRE_FIELDS = [f.name for f in dataclasses.fields(TireModelParams)]
-ESTIMATOR_NUMBERS = ("rate_hz", "min_speed", "speed_hysteresis", "timeout_cycles", "friction_excitation",
-                     "friction_correlation")
+SECTION_KEYS = {
+    (): ("vehicle", "input", "output", "estimator"),
+    ("input",): ("dbc", "bus", "signals", "messages"),
+    ("output",): ("dbc", "bus"),
+}
+BUS_KEYS = ("interface", "channel", "options")
+SET_BY_CANEST = ("interface", "channel", "can_filters")  # never a bus option: canest filters on the mapped IDs
+CHECKED_INTERFACES = ("socketcan", "virtual")  # python-can buses that silently ignore any keyword they do not name
+SIGNAL_KEYS = ("signal", "unit", "sign", "scale", "offset")
+CHECK_ROLES = tuple(f.name for f in dataclasses.fields(MessageChecks))
 NOISE_KEYS = {name: tuple(getattr(EstimatorConfig(), name)) for name in ("process_noise", "measurement_noise", "initial_std")}
 
 
 def _tire(doc: Document) -> TireModelParams:
     key_path = ("vehicle", "tire")
     section = doc.section(key_path, required=False)
-    doc.reject_unknown(key_path, section, TIRE_FIELDS)
+    doc.reject_unknown(key_path, section, limits.TIRE)
     defaults = TireModelParams()
-    return TireModelParams(**{name: doc.number(key_path, section, name, getattr(defaults, name),
-                                               positive=not name.endswith("curvature")) for name in TIRE_FIELDS})
+    return TireModelParams(**{name: doc.number(key_path, section, name, allowed, getattr(defaults, name))
+                              for name, allowed in limits.TIRE.items()})
 
 
 def _vehicle(doc: Document) -> VehicleParams:
     section = doc.section(("vehicle",))
-    doc.reject_unknown(("vehicle",), section, VEHICLE_FIELDS + ["name", "tire"])
-    values = {name: doc.number(("vehicle",), section, name) for name in VEHICLE_FIELDS}
-    return VehicleParams(name=str(section.get("name", doc.path.stem)), tire=_tire(doc), **values)
+    doc.reject_unknown(("vehicle",), section, [*limits.VEHICLE, "name", "tire"])
+    values = {name: doc.number(("vehicle",), section, name, allowed) for name, allowed in limits.VEHICLE.items()}
+    return VehicleParams(name=doc.text(("vehicle",), section, "name", doc.path.stem), tire=_tire(doc), **values)
+
+
+def _bus_keywords(interface: str) -> dict | None:
+    """The keywords (with defaults) python-can's bus class of ``interface`` names, if it ignores all others.
+
+    None for the other interfaces: their drivers take keywords of their own
+    (python-can's interface documentation lists them), passed on unchecked.
+    """
+    if interface not in CHECKED_INTERFACES:
+        return None
+    module, name = BACKENDS[interface]
+    parameters = inspect.signature(getattr(importlib.import_module(module), name).__init__).parameters.values()
+    return {p.name: p.default for p in parameters if p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY)
+            and p.name not in ("self", *SET_BY_CANEST)}
+
+
+def _bus_options(doc: Document, key_path: tuple, interface: str) -> dict:
+    options = doc.section(key_path, required=False)
+    keywords = _bus_keywords(interface)
+    for key, value in options.items():
+        if key in SET_BY_CANEST:
+            raise doc.error(key_path + (key,), "set by canest, not an option (interface and channel go one level up)")
+        if keywords is not None and key not in keywords:
+            raise doc.error(key_path + (key,), f"not an option of python-can's {interface} bus; "
+                                               f"{suggestion(key, keywords)}")
+        if keywords is not None and isinstance(keywords[key], bool) and not isinstance(value, bool):
+            raise doc.error(key_path + (key,), f"must be true or false, got {value!r}")
+    return dict(options)
 
 
 def _bus(doc: Document, key_path: tuple, default_channel: str) -> BusConfig:
     section = doc.section(key_path, required=False)
-    options = {k: v for k, v in section.items() if k not in ("interface", "channel")}
-    return BusConfig(str(section.get("interface", "socketcan")), str(section.get("channel", default_channel)), options)
+    doc.reject_unknown(key_path, section, BUS_KEYS, " (python-can keywords go under 'options:')")
+    interface = doc.text(key_path, section, "interface", "socketcan")
+    if interface not in VALID_INTERFACES:
+        raise doc.error(key_path + ("interface",), f"no python-can interface '{interface}'; "
+                                                   f"{suggestion(interface, VALID_INTERFACES)}")
+    channel = section.get("channel", default_channel)
+    if isinstance(channel, bool) or not isinstance(channel, (str, int)):
+        raise doc.error(key_path + ("channel",), f"must be a channel name or number, got {channel!r}")
+    return BusConfig(interface, str(channel), _bus_options(doc, key_path + ("options",), interface))
 
 
 def _dbc_path(doc: Document, key_path: tuple) -> Path:
-    section = doc.section(key_path[:-1])
-    if key_path[-1] not in section:
+    """The DBC file ``key_path`` names: a path relative to the config, or ``builtin:NAME`` for canest's own."""
+    given = doc.text(key_path[:-1], doc.section(key_path[:-1]), key_path[-1])
+    if given is None:
         raise doc.error(key_path, "missing DBC path")
-    given = str(section[key_path[-1]])
+    if "\0" in given:
+        raise doc.error(key_path, f"a path cannot hold a NUL character, got {given!r}")
+    builtin = sorted(p.name for p in BUILTIN_DIR.glob("*.dbc"))
+    if given.startswith(BUILTIN_PREFIX):
+        name = given[len(BUILTIN_PREFIX):]
+        if name not in builtin:
+            raise doc.error(key_path, f"no built-in DBC '{name}'; built in: "
+                                      f"{', '.join(BUILTIN_PREFIX + b for b in builtin)}")
+        return (BUILTIN_DIR / name).resolve()
     path = (doc.path.resolve().parent / given).resolve()
     if path.is_file():
         return path
-    builtin = BUILTIN_DIR / Path(given).name
-    if builtin.is_file():
-        return builtin.resolve()
-    raise doc.error(key_path, f"DBC file not found: {path}")
+    hint = f" (canest's own is '{BUILTIN_PREFIX}{path.name}')" if path.name in builtin else ""
+    raise doc.error(key_path, f"DBC file not found: {path}{hint}")
 
 
 def _estimator(doc: Document) -> EstimatorConfig:
@@ -73,27 +131,23 @@ def _estimator(doc: Document) -> EstimatorConfig:
     section = doc.section(key_path, required=False)
     defaults = EstimatorConfig()
     doc.reject_unknown(key_path, section, [f.name for f in dataclasses.fields(EstimatorConfig)])
-    values = {name: doc.number(key_path, section, name, getattr(defaults, name)) for name in ESTIMATOR_NUMBERS}
+    values = {name: doc.number(key_path, section, name, allowed, getattr(defaults, name))
+              for name, allowed in limits.ESTIMATOR.items()}
     for name, keys in NOISE_KEYS.items():
-        given = section.get(name, {})
-        if not isinstance(given, dict):
-            raise doc.error(key_path + (name,), "must be a mapping")
+        given = doc.section(key_path + (name,), required=False)
         doc.reject_unknown(key_path + (name,), given, keys)
-        merged = {**getattr(defaults, name)}
-        merged.update({k: doc.number(key_path + (name,), given, k) for k in given})
-        values[name] = merged
+        values[name] = {**getattr(defaults, name), **{k: doc.number(key_path + (name,), given, k, limits.NOISE)
+                                                       for k in given}}
     compensation = section.get("latency_compensation", defaults.latency_compensation)
     if not isinstance(compensation, bool):
         raise doc.error(key_path + ("latency_compensation",), f"must be true or false, got {compensation!r}")
 
-    name = str(section.get("filter", defaults.filter))
+    name = doc.text(key_path, section, "filter", defaults.filter)
     if name not in FILTERS:
-        raise doc.error(key_path + ("filter",), f"unknown filter '{name}'; available: {', '.join(sorted(FILTERS))}")
-    if values["friction_correlation"] >= 1.0:
-        raise doc.error(key_path + ("friction_correlation",), f"must be below 1, got {values['friction_correlation']}")
-    model = str(section.get("model", catalog.model_for(name)))
+        raise doc.error(key_path + ("filter",), f"unknown filter '{name}'; {suggestion(name, FILTERS)}")
+    model = doc.text(key_path, section, "model", catalog.model_for(name))
     if model not in catalog.CATALOG:
-        raise doc.error(key_path + ("model",), f"unknown model '{model}'; available: {', '.join(catalog.CATALOG)}")
+        raise doc.error(key_path + ("model",), f"unknown model '{model}'; {suggestion(model, catalog.CATALOG)}")
     if "filter" not in section and "model" in section:
         name = catalog.CATALOG[model].default_filter
     problem = catalog.misfit(name, model)
@@ -101,12 +155,13 @@ def _estimator(doc: Document) -> EstimatorConfig:
         raise doc.error(key_path + ("model",), problem)
     if compensation and not hasattr(catalog.CATALOG[model].model, "derivatives"):
         raise doc.error(key_path + ("latency_compensation",), f"model '{model}' has no derivatives to back-date by")
-    factorization = section.get("factorization", defaults.factorization)
+    factorization = doc.text(key_path, section, "factorization", defaults.factorization)
     if factorization is not None and factorization not in FACTORIZATIONS:
         raise doc.error(key_path + ("factorization",), f"must be one of {', '.join(FACTORIZATIONS)}")
-    options = section.get("filter_options", {})
-    if not isinstance(options, dict):
-        raise doc.error(key_path + ("filter_options",), "must be a mapping of option: value")
+    options = doc.section(key_path + ("filter_options",), required=False)
+    for key, value in options.items():
+        if isinstance(value, float) and not math.isfinite(value):
+            raise doc.error(key_path + ("filter_options", key), f"must be a finite number, got {value}")
     config = EstimatorConfig(filter=name, model=model, factorization=factorization, filter_options=options,
                              latency_compensation=compensation, **values)
     _check_filter_options(doc, config)
@@ -119,8 +174,52 @@ def _check_filter_options(doc: Document, est: EstimatorConfig) -> None:
     n = len(model.state_names)
     try:
         make_filter(est.filter, np.zeros(n), np.eye(n), model, est.factorization, est.filter_options)
-    except (TypeError, ValueError) as exc:
+    except (TypeError, ValueError, ArithmeticError) as exc:
         raise doc.error(("estimator", "filter_options"), f"{est.filter}: {exc}") from None
+
+
+def _never_decodes(message, signal) -> str | None:
+    """Why no frame of ``message`` yields ``signal`` (None if one does): a frame selecting its multiplexer page(s)."""
+    by_name = {s.name: s for s in message.signals}
+    pages = {}
+    current = signal
+    while current.multiplexer_signal and current.multiplexer_ids and current.multiplexer_signal not in pages:
+        pages[current.multiplexer_signal] = current.multiplexer_ids[0]
+        current = by_name[current.multiplexer_signal]
+    values = {s.name: pages.get(s.name, 0) if s.is_multiplexer else clamp_to_signal(s, 0.0) for s in message.signals}
+    selection = ", ".join(f"{mux} = {page}" for mux, page in pages.items())
+    try:
+        decoded = message.decode(message.encode(values, strict=False), decode_choices=False)
+    except Exception as exc:  # cantools raises several error types for a page its multiplexer cannot carry
+        return f"a frame with {selection or 'its values'} cannot be built ({exc})"
+    return None if signal.name in decoded else f"a frame with {selection or 'its values'} does not carry it"
+
+
+def _mapped_signal(doc: Document, where: tuple, database, dbc_path: Path, given) -> tuple:
+    """The DBC message and signal ``MESSAGE.SIGNAL`` names; it must decode from a frame ID of its own."""
+    if not isinstance(given, str):
+        raise doc.error(where, f"must be MESSAGE.SIGNAL, got {given!r}")
+    message_name, _, signal_name = given.partition(".")
+    try:
+        message = database.get_message_by_name(message_name)
+    except KeyError:
+        choices = [m.name for m in database.messages]
+        raise doc.error(where, f"no message '{message_name}' in {dbc_path}; {suggestion(message_name, choices)}") from None
+    signal = next((s for s in message.signals if s.name == signal_name), None)
+    if signal is None:
+        choices = [s.name for s in message.signals]
+        raise doc.error(where, f"no signal '{signal_name}' in message '{message_name}' of {dbc_path}; "
+                               f"{suggestion(signal_name, choices)}")
+    sharing = [m.name for m in database.messages if m is not message and m.frame_id == message.frame_id
+               and m.is_extended_frame == message.is_extended_frame]
+    if sharing:
+        raise doc.error(where, f"message '{message_name}' shares frame ID {message.frame_id:#x} with "
+                               f"'{', '.join(sharing)}' in {dbc_path}: its frames cannot be told apart; "
+                               "give each message its own ID")
+    problem = _never_decodes(message, signal)
+    if problem:
+        raise doc.error(where, f"{message_name}.{signal_name} never decodes from {dbc_path}: {problem}")
+    return message, signal
 
 
 def _signal_specs(doc: Document, database, dbc_path: Path, vehicle: VehicleParams) -> dict:
@@ -130,38 +229,30 @@ def _signal_specs(doc: Document, database, dbc_path: Path, vehicle: VehicleParam
     for canonical, entry in section.items():
         where = key_path + (canonical,)
         if canonical not in sig.CANONICAL:
-            raise doc.error(where, f"unknown canonical signal; known: {', '.join(sig.CANONICAL)}")
+            raise doc.error(where, f"unknown canonical signal; {suggestion(canonical, sig.CANONICAL)}")
         if isinstance(entry, str):
             entry = {"signal": entry}
         if not isinstance(entry, dict) or "signal" not in entry:
             raise doc.error(where, "needs 'signal: MESSAGE.SIGNAL'")
-        doc.reject_unknown(where, entry, ("signal", "unit", "sign", "scale", "offset"))
-        message_name, _, signal_name = str(entry["signal"]).partition(".")
-        try:
-            message = database.get_message_by_name(message_name)
-        except KeyError:
-            raise doc.error(where + ("signal",), f"no message '{message_name}' in {dbc_path}") from None
-        signal = next((s for s in message.signals if s.name == signal_name), None)
-        if signal is None:
-            raise doc.error(where + ("signal",), f"no signal '{signal_name}' in message '{message_name}' of {dbc_path}")
-        unit = entry.get("unit", signal.unit)
+        doc.reject_unknown(where, entry, SIGNAL_KEYS)
+        message, signal = _mapped_signal(doc, where + ("signal",), database, dbc_path, entry["signal"])
+        name = f"{message.name}.{signal.name}"
+        unit = doc.text(where, entry, "unit", signal.unit)
         if not unit:
-            raise doc.error(where, f"signal {message_name}.{signal_name} has no unit in the DBC; give 'unit'")
-        if signal.unit and entry.get("unit") and signal.unit.strip() != str(unit).strip():
-            raise doc.error(where + ("unit",), f"'{unit}' contradicts the DBC unit '{signal.unit}' of {message_name}.{signal_name}")
+            raise doc.error(where, f"signal {name} has no unit in the DBC; give 'unit'")
+        if signal.unit and entry.get("unit") and signal.unit.strip() != unit.strip():
+            raise doc.error(where + ("unit",), f"'{unit}' contradicts the DBC unit '{signal.unit}' of {name}")
         try:
-            factor = sig.si_factor(canonical, str(unit), vehicle.wheel_radius)
+            factor = sig.si_factor(canonical, unit, vehicle.wheel_radius)
         except ValueError as exc:
             raise doc.error(where + ("unit",), str(exc)) from None
         sign = entry.get("sign", 1)
-        if sign not in (1, -1):
-            raise doc.error(where + ("sign",), "must be 1 or -1")
-        scale = doc.number(where, entry, "scale", 1.0)
-        offset = doc.number(where, entry, "offset", 0.0, positive=False)
-        mux = None
-        if signal.multiplexer_ids:
-            mux = int(signal.multiplexer_ids[0])
-        specs[canonical] = SignalSpec(canonical, message_name, signal_name, sign * scale * factor, offset, mux)
+        if isinstance(sign, bool) or sign not in (1, -1):
+            raise doc.error(where + ("sign",), f"must be 1 or -1, got {sign!r}")
+        scale = doc.number(where, entry, "scale", limits.SIGNAL["scale"], 1.0)
+        offset = doc.number(where, entry, "offset", limits.SIGNAL["offset"], 0.0)
+        mux = int(signal.multiplexer_ids[0]) if signal.multiplexer_ids else None
+        specs[canonical] = SignalSpec(canonical, message.name, signal.name, sign * scale * factor, offset, mux)
     return specs
 
 
@@ -177,22 +268,29 @@ def _check_model_inputs(doc: Document, est: EstimatorConfig, specs: dict) -> Non
 
 
 def _message_checks(doc: Document, database, dbc_path: Path, specs: dict) -> dict:
+    """Integrity checks of mapped messages (a check on a message no signal is taken from would never run)."""
     key_path = ("input", "messages")
     section = doc.section(key_path, required=False)
+    mapped = {spec.message for spec in specs.values()}
     checks = {}
     for name, entry in section.items():
         where = key_path + (name,)
         try:
             message = database.get_message_by_name(name)
         except KeyError:
-            raise doc.error(where, f"no message '{name}' in {dbc_path}") from None
-        if not isinstance(entry, dict):
-            raise doc.error(where, "must map counter/checksum/valid to signal names")
-        doc.reject_unknown(where, entry, ("counter", "checksum", "valid"))
-        names = {s.name for s in message.signals}
-        for role, signal_name in entry.items():
+            choices = [m.name for m in database.messages]
+            raise doc.error(where, f"no message '{name}' in {dbc_path}; {suggestion(name, choices)}") from None
+        if name not in mapped:
+            raise doc.error(where, "no signal of input.signals comes from this message, so its checks would never "
+                                   "run; map one of its signals or remove the entry")
+        entry = doc.section(where)
+        doc.reject_unknown(where, entry, CHECK_ROLES)
+        names = [s.name for s in message.signals]
+        for role in entry:
+            signal_name = doc.text(where, entry, role)
             if signal_name not in names:
-                raise doc.error(where + (role,), f"no signal '{signal_name}' in message '{name}' of {dbc_path}")
+                raise doc.error(where + (role,), f"no signal '{signal_name}' in message '{name}' of {dbc_path}; "
+                                                 f"{suggestion(signal_name, names)}")
         checks[name] = MessageChecks(**entry)
     return checks
 
@@ -201,7 +299,8 @@ def load_config(path) -> Config:
     """Read and validate a config file; raise ConfigError naming file, line and key."""
     path = Path(path)
     doc = Document(path)
-    doc.reject_unknown((), doc.data, ("vehicle", "input", "output", "estimator"))
+    for key_path, known in SECTION_KEYS.items():
+        doc.reject_unknown(key_path, doc.section(key_path), known)
     vehicle = _vehicle(doc)
     input_dbc = _dbc_path(doc, ("input", "dbc"))
     output_dbc = _dbc_path(doc, ("output", "dbc"))

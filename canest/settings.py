@@ -14,7 +14,7 @@ from canest.params import VehicleParams
 
 @dataclass(frozen=True)
 class BusConfig:
-    """Arguments for ``can.Bus``: interface, channel and any extra keyword."""
+    """Arguments for ``can.Bus``: interface, channel and the config's python-can ``options``."""
 
     interface: str = "socketcan"
     channel: str = "vcan0"

@@ -15,7 +15,7 @@ LAYERS = [  # bottom first
     ("canest.models", "canest.filters"),
     ("canest.settings",),
     ("canest.estimation", "canest.codec", "canest.resample", "canest.io"),
-    ("canest.config", "canest.yamldoc", "canest.pipeline"),
+    ("canest.config", "canest.yamldoc", "canest.limits", "canest.pipeline"),
     ("canest.apps", "canest.sim"),
     ("canest.cli", "canest.commands", "canest.__main__"),
 ]

@@ -2,20 +2,27 @@
 import math
 import re
 import shutil
+import subprocess
+import sys
 
 import pytest
 import yaml
 
-from canest.config import ConfigError, load_config
+from canest import limits
+from canest.config import BUILTIN_DIR, BUILTIN_PREFIX, DEFAULT_CONFIG, ConfigError, load_config
+from canest.yamldoc import MAX_BYTES, MAX_NODES
 from tests.conftest import CONFIG, ROOT
+from tests.test_cli import canest
 
 
 def write_variant(tmp_path, edit):
-    """Copy the reference config beside copies of the DBCs, apply ``edit`` to its dict, return the path."""
+    """Copy the reference config beside copies of the DBCs it reads, apply ``edit`` to its dict, return the path."""
     (tmp_path / "dbc").mkdir(exist_ok=True)
     for dbc in (ROOT / "dbc").glob("*.dbc"):
         shutil.copy(dbc, tmp_path / "dbc" / dbc.name)
     data = yaml.safe_load(CONFIG.read_text())
+    for section in ("input", "output"):  # the copies, not the built-in DBCs
+        data[section]["dbc"] = "../dbc/" + data[section]["dbc"].removeprefix(BUILTIN_PREFIX)
     edit(data)
     path = tmp_path / "configs" / "car.yaml"
     path.parent.mkdir(exist_ok=True)
@@ -152,3 +159,174 @@ def test_tire_section_is_validated(tmp_path):
     assert re.search(r":\d+: vehicle\.tire\.relaxaton_length: unknown key", error_of(path))
     path = write_variant(tmp_path, lambda d: d["estimator"].update(friction_correlation=1.0))
     assert "friction_correlation: must be below 1" in error_of(path)
+
+
+# Issue 18: nothing silently accepted. Each case below was accepted (or ended in a traceback) before.
+
+def check_error(path) -> str:
+    """The one stderr line of a failing ``canest check`` (exit 2)."""
+    result = canest("check", "--config", path, check=False)
+    lines = result.stderr.strip().splitlines()
+    assert result.returncode == 2 and len(lines) == 1 and "OK" not in result.stdout, result.stdout + result.stderr
+    return lines[0]
+
+
+def test_a_typo_in_input_messages_is_refused_not_every_crc_check_switched_off(tmp_path):
+    path = write_variant(tmp_path, lambda d: d["input"].update(mesages=d["input"].pop("messages")))
+    line = yaml_line(path, "mesages")
+    assert check_error(path) == f"canest: error: {path}:{line}: input.mesages: unknown key; did you mean 'messages'?"
+
+
+def yaml_line(path, key) -> int:
+    """The line of ``key:`` in the file."""
+    return next(n for n, text in enumerate(path.read_text().splitlines(), 1) if text.strip().startswith(f"{key}:"))
+
+
+@pytest.mark.parametrize("edit, expected", [
+    (lambda d: d["input"].update(dbcc=d["input"].pop("dbc")), r"input\.dbcc: unknown key; did you mean 'dbc'\?"),
+    (lambda d: d["input"]["bus"].update(chanel=d["input"]["bus"].pop("channel")),
+     r"input\.bus\.chanel: unknown key; did you mean 'channel'\?"),
+    (lambda d: d["output"].update(buss={}), r"output\.buss: unknown key; did you mean 'bus'\?"),
+    (lambda d: d["output"]["bus"].update(bitrate=500000),
+     r"output\.bus\.bitrate: unknown key; valid keys: channel, interface, options \(python-can keywords go under "
+     r"'options:'\)"),
+    (lambda d: d.update(logging={"level": "debug"}),
+     r"logging: unknown key; valid keys: estimator, input, output, vehicle"),
+    (lambda d: d["input"]["signals"].update(yawrate="ESC_IMU.YawRate"),
+     r"input\.signals\.yawrate: unknown canonical signal; did you mean 'yaw_rate'\?"),
+])
+def test_unknown_keys_are_refused_everywhere_with_the_nearest_valid_one(tmp_path, edit, expected):
+    path = write_variant(tmp_path, edit)
+    assert re.fullmatch(rf"{re.escape(str(path))}:\d+: {expected}", error_of(path))
+
+
+def test_bus_options_are_python_can_keywords_checked_where_python_can_would_ignore_them(tmp_path):
+    path = write_variant(tmp_path, lambda d: None)
+    assert load_config(path).input_bus.kwargs() == {"interface": "socketcan", "channel": "vcan0", "fd": True}
+    assert " on socketcan:vcan0 (fd=True)\n" in canest("check", "--config", path).stdout
+    path = write_variant(tmp_path, lambda d: d["input"]["bus"]["options"].update(fdd=True))
+    assert "input.bus.options.fdd: not an option of python-can's socketcan bus; did you mean 'fd'?" in error_of(path)
+    path = write_variant(tmp_path, lambda d: d["input"]["bus"]["options"].update(fd="yes"))
+    assert "input.bus.options.fd: must be true or false, got 'yes'" in error_of(path)
+    path = write_variant(tmp_path, lambda d: d["input"]["bus"]["options"].update(can_filters=[]))
+    assert "input.bus.options.can_filters: set by canest, not an option" in error_of(path)
+    path = write_variant(tmp_path, lambda d: d["input"]["bus"].update(interface="sockectan"))
+    assert "input.bus.interface: no python-can interface 'sockectan'; did you mean 'socketcan'?" in error_of(path)
+    # A driver with keywords of its own (python-can's PCAN documentation): passed on as given.
+    path = write_variant(tmp_path, lambda d: d["input"].update(bus={"interface": "pcan", "channel": "PCAN_USBBUS1",
+                                                                    "options": {"bitrate": 500000, "fd": False}}))
+    assert load_config(path).input_bus.kwargs() == {"interface": "pcan", "channel": "PCAN_USBBUS1",
+                                                    "bitrate": 500000, "fd": False}
+
+
+@pytest.mark.parametrize("section, key, value, expected", [
+    (("vehicle",), "mass", math.nan, "must be a finite number (100 to 60000 kg), got nan"),
+    (("vehicle",), "mass", math.inf, "must be a finite number (100 to 60000 kg), got inf"),
+    (("vehicle",), "mass", 1.845, "must be at least 100 (100 to 60000 kg), got 1.845"),
+    (("vehicle",), "mass", 10 ** 400, "must be a finite number (100 to 60000 kg), got inf"),
+    (("vehicle",), "wheel_radius", 359.0, "must be at most 2 (0.1 to 2 m), got 359.0"),
+    (("vehicle",), "steering_ratio", 0.5, "must be at least 1 (1 to 50), got 0.5"),
+    (("vehicle", "tire"), "nominal_friction", 9.0, "must be at most 2 (0.05 to 2), got 9.0"),
+    (("vehicle", "tire"), "lateral_curvature", 1.5, "must be at most 1 (-10 to 1), got 1.5"),
+    (("estimator",), "rate_hz", 0.001, "must be at least 1 (1 to 1000 Hz), got 0.001"),
+    (("estimator",), "rate_hz", 5000, "must be at most 1000 (1 to 1000 Hz), got 5000"),
+    (("estimator",), "min_speed", -1.0, "must be at least 0 (0 to 50 m/s), got -1.0"),
+    (("estimator",), "timeout_cycles", 0.5, "must be at least 1 (1 to 1000), got 0.5"),
+    (("estimator",), "friction_correlation", 1.0, "must be below 1 (0 to below 1), got 1.0"),
+    (("estimator",), "friction_correlation", -0.2, "must be at least 0 (0 to below 1), got -0.2"),
+    (("estimator", "process_noise"), "vx", math.nan, "must be a finite number (1e-09 to 1e+06), got nan"),
+    (("estimator", "measurement_noise"), "ay", 0.0, "must be positive (1e-09 to 1e+06), got 0.0"),
+    (("input", "signals", "ay"), "scale", math.inf, "must be a finite number (1e-09 to 1e+09), got inf"),
+    (("input", "signals", "ay"), "offset", math.nan, "must be a finite number (-1e+09 to 1e+09), got nan"),
+    (("estimator", "filter_options"), "r_floor", math.nan, "must be a finite number, got nan"),
+])
+def test_every_number_has_a_physical_range(tmp_path, section, key, value, expected):
+    def edit(d):
+        target = d
+        for name in section:
+            target = target.setdefault(name, {})
+        target[key] = value
+
+    message = error_of(write_variant(tmp_path, edit))
+    assert re.search(rf":\d+: {re.escape('.'.join(section + (key,)))}: {re.escape(expected)}", message), message
+
+
+def test_rate_and_mass_that_ran_into_nonsense_are_refused_by_check(tmp_path):
+    """rate_hz 0.001 gave estimates like 1.97e+30 flagged valid; mass .nan gave 811 resets; both passed check."""
+    path = write_variant(tmp_path, lambda d: d["estimator"].update(rate_hz=0.001))
+    assert check_error(path).endswith("estimator.rate_hz: must be at least 1 (1 to 1000 Hz), got 0.001")
+    path = write_variant(tmp_path, lambda d: d["vehicle"].update(mass=math.nan))
+    assert check_error(path).endswith("vehicle.mass: must be a finite number (100 to 60000 kg), got nan")
+
+
+def test_readme_table_states_every_range():
+    """The README's configuration table is the one in canest/limits.py."""
+    text = (ROOT / "README.md").read_text()
+    tables = {"vehicle": limits.VEHICLE, "vehicle.tire": limits.TIRE, "estimator": limits.ESTIMATOR,
+              "input.signals.*": limits.SIGNAL}
+    for prefix, table in tables.items():
+        for key, allowed in table.items():
+            assert f"| `{prefix}.{key}` | {allowed} |" in text, f"{prefix}.{key}: {allowed}"
+    assert f"| `estimator.process_noise.*`, `measurement_noise.*`, `initial_std.*` | {limits.NOISE} |" in text
+
+
+def test_a_missing_dbc_is_an_error_not_a_silent_built_in(tmp_path):
+    path = write_variant(tmp_path, lambda d: d["input"].update(dbc="../nowhere/canest_vehicle.dbc"))
+    assert re.search(r":\d+: input\.dbc: DBC file not found: .*/nowhere/canest_vehicle\.dbc "
+                     r"\(canest's own is 'builtin:canest_vehicle\.dbc'\)$", error_of(path))
+    path = write_variant(tmp_path, lambda d: d["input"].update(dbc="../dbc/canest\0vehicle.dbc"))
+    assert error_of(path).endswith("input.dbc: a path cannot hold a NUL character, got '../dbc/canest\\x00vehicle.dbc'")
+    path = write_variant(tmp_path, lambda d: d["input"].update(dbc="builtin:canest_vehicel.dbc"))
+    assert error_of(path).endswith("input.dbc: no built-in DBC 'canest_vehicel.dbc'; built in: "
+                                   "builtin:canest_estimates.dbc, builtin:canest_vehicle.dbc")
+
+
+def test_built_in_dbcs_by_their_built_in_names_wherever_the_config_is(tmp_path):
+    """The default config names builtin: DBCs, so it loads as installed (a copy, not a link into the source tree)."""
+    copy = tmp_path / "dici_ev.yaml"
+    copy.write_text(DEFAULT_CONFIG.read_text())
+    config = load_config(copy)
+    assert config.input_dbc == (BUILTIN_DIR / "canest_vehicle.dbc").resolve()
+    assert config.output_dbc == (BUILTIN_DIR / "canest_estimates.dbc").resolve()
+    assert load_config(DEFAULT_CONFIG).input_dbc == config.input_dbc
+
+
+def test_yaml_alias_bomb_is_refused_at_once(tmp_path):
+    """A "billion laughs" config (9^9 values once expanded) kept `canest check` busy for minutes."""
+    lines = ['a0: &a0 ["lol", "lol", "lol", "lol", "lol", "lol", "lol", "lol", "lol"]']
+    lines += [f"a{n}: &a{n} [{', '.join([f'*a{n - 1}'] * 9)}]" for n in range(1, 9)]
+    bomb = tmp_path / "bomb.yaml"
+    bomb.write_text("\n".join(lines) + "\n")
+    result = subprocess.run([sys.executable, "-m", "canest", "check", "--config", str(bomb)], capture_output=True,
+                            text=True, timeout=120)
+    assert result.returncode == 2
+    assert result.stderr == (f"canest: error: {bomb}: YAML expands to more than {MAX_NODES} values "
+                             "(aliases repeating an anchor?); a config needs a few hundred\n")
+
+
+@pytest.mark.parametrize("text, expected", [
+    ("a: &x [*x]\n", ":1: a: nested more than 32 levels deep (or an alias inside its own anchor)"),
+    ("[" * 5000 + "]" * 5000 + "\n", ": YAML nested too deeply (more than 32 levels)"),
+    ("vehicle: 1\nvehicle: 2\n", ":2: vehicle: given twice (first at line 1)"),
+    ("base: &b {mass: 1}\nvehicle:\n  <<: *b\n", ":3: vehicle: merge keys (<<) are not supported; write the keys out"),
+    ("vehicle: !!set {a, b}\n", ":1: vehicle: the tag tag:yaml.org,2002:set is not supported; write a plain mapping"),
+    ("vehicle: !!python/object/apply:os.system [ls]\n", ":1: vehicle: the tag tag:yaml.org,2002:python/object/apply"),
+    ("vehicle:\n  mass: !!python/name:os.system\n", ":2: vehicle.mass: could not determine a constructor for the tag"),
+    ("? [a, b]\n: 1\n", ":1: top level: a key must be a name"),
+    ("\"vehicle\\n\": 1\n", ":1: vehicle\\n: unknown key; did you mean 'vehicle'?"),
+    ("vehicle:\n  mass: 1" + "0" * 5000 + "\n", ":2: vehicle.mass: Exceeds the limit (4300 digits) for integer string"),
+    ("vehicle: \x07\n", ": invalid YAML: special characters are not allowed at position 9"),
+    ("a: 1\n---\nb: 2\n", ": invalid YAML, line 2: expected a single document in the stream, but found another"),
+])
+def test_yaml_that_no_config_needs_is_one_error_line(tmp_path, text, expected):
+    path = tmp_path / "car.yaml"
+    path.write_text(text)
+    message = error_of(path)
+    assert message.startswith(f"{path}{expected}") and "\n" not in message, message
+
+
+def test_a_config_larger_than_the_limit_is_refused_unread(tmp_path):
+    path = tmp_path / "car.yaml"
+    path.write_text("# padding\n" * (MAX_BYTES // 10 + 1))
+    assert error_of(path) == f"{path}: config larger than 1024 KiB; a config is a few kilobytes"
+    assert error_of(tmp_path) == f"{tmp_path}: cannot read config: Is a directory"

@@ -17,6 +17,12 @@ def register(subparsers) -> None:
     p.set_defaults(func=run)
 
 
+def _bus(bus) -> str:
+    """``interface:channel`` and the python-can options the bus is opened with."""
+    options = ", ".join(f"{key}={value!r}" for key, value in bus.options.items())
+    return f"{bus.interface}:{bus.channel}" + (f" ({options})" if options else "")
+
+
 def run(args) -> int:
     config = config_from_args(args)
     decoder = InputDecoder(config)
@@ -26,8 +32,8 @@ def run(args) -> int:
     print(f"config   {config.path}")
     print(f"vehicle  {v.name}: m={v.mass:g} kg, Iz={v.yaw_inertia:g} kg m^2, a={v.cg_to_front:g} m, "
           f"b={v.cg_to_rear:g} m, steering ratio {v.steering_ratio:g}")
-    print(f"input    {config.input_dbc} on {config.input_bus.interface}:{config.input_bus.channel}")
-    print(f"output   {config.output_dbc} on {config.output_bus.interface}:{config.output_bus.channel}")
+    print(f"input    {config.input_dbc} on {_bus(config.input_bus)}")
+    print(f"output   {config.output_dbc} on {_bus(config.output_bus)}")
     e = config.estimator
     print(f"filter   {e.filter} ({e.factorization}) at {e.rate_hz:g} Hz, low-speed below {e.min_speed:g} m/s")
     print()
