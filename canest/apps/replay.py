@@ -65,7 +65,7 @@ def replay(config: Config, log_path, out_log=None, out_csv=None, progress: bool 
         source.stop()
     for warning in source.warnings():
         LOG.warning(warning)
-    return {**pipeline.summary(), **source.damage.summary(), **({"stopped": 1} if stopped else {})}
+    return {"frames": 0, **pipeline.summary(), **source.damage.summary(), **({"stopped": 1} if stopped else {})}
 
 
 def play(log_path, bus: can.BusABC, speed: float = 1.0, progress: bool = True) -> int:

@@ -17,22 +17,32 @@ from canest.errors import CanestError, LogError
 
 
 class BlockFeed:
-    """A binary stream as the file object python-can's reader reads, counting bytes and noticing a short read."""
+    """A binary stream as the file object python-can's reader reads, counting bytes and noticing a short read.
 
-    def __init__(self, stream):
+    Reads are capped at what the file holds (``size``; None: unknown), so a corrupt object length does not
+    make python-can ask for gigabytes.
+    """
+
+    def __init__(self, stream, size=None):
         self.stream = stream
+        self.size = size
         self.position = 0
         self.short = False  # a read got some but not all of what it asked for: the file ends inside an object
+        self.hit_end = False  # a read got less than it asked for (also python-can probing past the last object)
 
     def read(self, size: int = -1) -> bytes:
+        wanted = size
+        if self.size is not None and (size < 0 or size > self.size - self.position):
+            size = max(self.size - self.position, 0)
         try:
             data = self.stream.read(size)
         except (EOFError, zlib.error, gzip.BadGzipFile):  # a damaged .blf.gz: its data ends here
-            self.short = True
+            self.short = self.hit_end = True
             return b""
         self.position += len(data)
-        if 0 < len(data) < size:
-            self.short = True
+        if wanted > len(data):
+            self.hit_end = True
+            self.short = self.short or len(data) > 0
         return data
 
     def close(self) -> None:
@@ -42,7 +52,7 @@ class BlockFeed:
 def blf_frames(path, stream, size, damage):
     """The frames of a BLF of ``size`` bytes (None: compressed, unknown); a truncated or corrupt one ends with
     ``damage`` saying how far it was read (in bytes of the BLF itself)."""
-    feed = BlockFeed(stream)
+    feed = BlockFeed(stream, size)
     try:
         reader = can.BLFReader(feed)
     except (CanestError, OSError):
@@ -60,7 +70,7 @@ def blf_frames(path, stream, size, damage):
         raise
     except Exception as exc:  # zlib.error, BLFParseError, struct.error: python-can cannot decode what follows
         end = feed.position if size is None else size
-        cause = "truncated" if feed.short or feed.position >= end else "corrupt"
+        cause = "truncated" if feed.hit_end else "corrupt"  # a read went past the end, or the data is wrong
         damage.stop(cause, end - frames_end,
                     f"{cause}: frames read up to byte {frames_end} of {end}; the {end - frames_end} bytes after it "
                     f"could not be decoded ({type(exc).__name__}: {exc})")

@@ -3,7 +3,7 @@
 Causes (summary key ``log_<cause>``):
 
 - ``bad_lines``: lines python-can's parser for the format rejects;
-- ``torn_line``: the last line, cut mid-write (no newline at its end) and unparsable;
+- ``torn_line``: the last line, cut mid-write (no newline at its end; never parsed);
 - ``junk_lines``: ASC lines that are neither frames nor ASC header or event lines;
 - ``reader_warnings``: things python-can's reader itself reported skipping (an
   unknown BLF compression method or object version, ...);
@@ -26,6 +26,8 @@ class LogDamage:
         self.detail = {}  # cause -> the first error's text
         self.unread_bytes = 0
         self.stopped = None  # why reading ended before the end of the file, if it did
+        self.lines = 0  # text logs: lines read, each a frame, a quiet line or counted by cause
+        self.quiet_lines = 0  # blank, comment, header and event lines (skipped on purpose, not damage)
 
     def skip(self, cause: str, line: int, detail: str = "") -> None:
         """One line skipped for ``cause``."""

@@ -30,6 +30,8 @@ class LineFeed:
 
     ``is_metadata(text)`` tells a line the reader skipped on purpose (kept uncounted) from junk (counted).
     A binary stream is read and decoded here (UTF-8, undecodable bytes replaced, so the parser judges them).
+    A last line without its newline was cut mid-write: it is counted (``torn_line``) and never parsed, as what
+    python-can would read from it may be a frame cut short.
     """
 
     def __init__(self, stream, damage, is_metadata):
@@ -38,9 +40,7 @@ class LineFeed:
         self.is_metadata = is_metadata
         self.number = 0  # of the last line handed out
         self.pending = None  # text of the last line handed out, until its fate is known
-        self.terminated = True  # the last line handed out ended with a newline (else the file ends mid-line)
         self.pushed = []
-        self.skipped = 0  # blank, comment, header and event lines
 
     def __iter__(self):
         return self
@@ -58,9 +58,13 @@ class LineFeed:
         if not raw:
             raise StopIteration
         self.number += 1
-        self.terminated = raw.endswith(b"\n")
-        self.pending = raw.decode("utf-8", errors="replace")
-        return self.pending
+        self.damage.lines = self.number
+        text = raw.decode("utf-8", errors="replace")
+        if not raw.endswith(b"\n") and text.strip():  # the file ends mid-line: never parsed, it may be cut short
+            self.damage.skip("torn_line", self.number, repr(text.strip()[:60]))
+            raise StopIteration
+        self.pending = text
+        return text
 
     def _settle(self) -> None:
         """The line handed out last gave neither a frame nor an error: the reader skipped it."""
@@ -68,9 +72,7 @@ class LineFeed:
             return
         text, self.pending = self.pending.strip(), None
         if not text or self.is_metadata(text):
-            self.skipped += 1
-        elif not self.terminated:
-            self.damage.skip("torn_line", self.number, repr(text[:60]))
+            self.damage.quiet_lines += 1
         else:
             self.damage.skip("junk_lines", self.number, repr(text[:60]))
 
@@ -81,8 +83,7 @@ class LineFeed:
     def failed(self, exc: Exception) -> None:
         """The reader could not parse the line handed out last."""
         self.pending = None
-        cause = "bad_lines" if self.terminated else "torn_line"
-        self.damage.skip(cause, self.number, f"{type(exc).__name__}: {exc}")
+        self.damage.skip("bad_lines", self.number, f"{type(exc).__name__}: {exc}")
 
     def finish(self) -> None:
         self._settle()
@@ -140,6 +141,8 @@ class TrcLines(HeaderOnce, can.TRCReader):
 
     def _parse_line(self, line: str):
         """python-can's, but a short line raises (python-can logs it and drops it uncounted)."""
+        if not line:
+            return None  # the header ran to the end of the file
         return self._parse_cols(tuple(line.split(maxsplit=self._num_columns)))
 
 
