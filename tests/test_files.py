@@ -254,3 +254,21 @@ def test_a_signal_stops_the_replay_in_order_with_its_summary_and_complete_files(
     assert len({row.count(",") for row in rows}) == 1, "every row complete"
     ticks = [m.timestamp for m in can.LogReader(str(est_log)) if m.arbitration_id == 0x501]
     assert len(ticks) == len(rows) - 1 > 100, "both files hold the same ticks, up to the last one processed"
+
+
+def test_a_second_signal_aborts_at_once_without_outputs(long_log, tmp_path):
+    log, _ = long_log
+    est_csv = tmp_path / "est.csv"
+    process = subprocess.Popen([*CANEST, "replay", str(log), "--csv", str(est_csv), "-q"],
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=ROOT)
+    deadline = time.monotonic() + 120
+    while not any(p.stat().st_size > 20000 for p in tmp_path.iterdir() if ".partial" in p.name):
+        assert process.poll() is None and time.monotonic() < deadline, "the replay ended before it was signalled"
+        time.sleep(0.05)
+    process.send_signal(signal.SIGSTOP)  # both pending when it goes on: its handlers run back to back
+    process.send_signal(signal.SIGINT)
+    process.send_signal(signal.SIGTERM)
+    process.send_signal(signal.SIGCONT)
+    stdout, stderr = process.communicate(timeout=120)
+    assert process.returncode == 130 and stdout == "", stderr
+    assert list(tmp_path.iterdir()) == [], "no output and no temporary file"
