@@ -212,6 +212,11 @@ def test_simulate_at_a_speed_the_plant_cannot_drive_is_a_usage_error(tmp_path, s
     assert list(tmp_path.iterdir()) == []
 
 
+def test_realtime_playback_at_speed_0_is_a_usage_error(drive):
+    one_line_error(canest("replay", drive[0], "--realtime", "--speed", "0", "--interface", "virtual"), 2,
+                   "--speed: a playback speed factor above 0, e.g. 1 or 10, got 0.0")
+
+
 def test_the_exit_status_table_is_in_the_help():
     out = canest("--help").stdout
     for line in ("  65  input data", "  66  no input", "  69  unavailable", "  73  cannot create", "  74  I/O error"):

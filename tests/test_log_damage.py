@@ -6,7 +6,7 @@ import can
 import pytest
 
 from canest.apps.evaluate import read_table
-from canest.apps.replay import replay
+from canest.apps.replay import play, replay
 from canest.errors import LogError
 from canest.io.logfiles import open_log
 from canest.sim.simulate import simulate
@@ -46,7 +46,8 @@ def replace_line(path, number, text):
 
 
 def same_frame(a, b) -> bool:
-    return (a.arbitration_id, bytes(a.data), a.timestamp) == (b.arbitration_id, bytes(b.data), pytest.approx(b.timestamp))
+    return (a.arbitration_id, bytes(a.data)) == (b.arbitration_id, bytes(b.data)) and a.timestamp == pytest.approx(
+        b.timestamp)
 
 
 def test_a_bad_candump_line_is_skipped_counted_and_the_replay_goes_on(config, drive, tmp_path, caplog):
@@ -192,3 +193,21 @@ def test_one_infinite_timestamp_is_one_rejected_frame_not_a_backwards_clock(conf
     assert summary["frames"] == len(drive) == accounted(summary)
     assert len(read_table(tmp_path / "glitch.csv")["t"]) == len(read_table(tmp_path / "clean.csv")["t"])
     assert expected["decoded"] - summary["decoded"] <= 1
+
+
+def test_realtime_playback_skips_bad_lines_and_frames_without_a_time_and_says_so(drive, tmp_path, caplog):
+    log = write(drive, tmp_path / "play.log")
+    replace_line(log, 10, "(0.02) vcan0 130#ZZ\n")
+    line = log.read_text().splitlines()[19]
+    replace_line(log, 20, "(nan)" + line[line.index(")") + 1:] + "\n")
+    bus, listener = can.Bus(interface="virtual", channel="play"), can.Bus(interface="virtual", channel="play")
+    try:
+        with caplog.at_level(logging.WARNING, logger="canest"):
+            sent = play(log, bus, speed=100.0, progress=False)
+        received = iter(lambda: listener.recv(timeout=0.2), None)
+        assert sent == len(drive) - 2 == sum(1 for _ in received)
+    finally:
+        bus.shutdown()
+        listener.shutdown()
+    assert "skipped 1 line(s) the reader could not parse (line 10)" in caplog.text
+    assert "1 frame(s) without a finite timestamp were not sent" in caplog.text

@@ -9,6 +9,7 @@ under their names only when the replay ends well (:mod:`canest.io.outputs`).
 from __future__ import annotations
 
 import logging
+import math
 import os
 import time
 from contextlib import ExitStack
@@ -69,12 +70,21 @@ def replay(config: Config, log_path, out_log=None, out_csv=None, progress: bool 
 
 
 def play(log_path, bus: can.BusABC, speed: float = 1.0, progress: bool = True) -> int:
-    """Send a log's frames onto ``bus`` at their recorded timing (like canplayer); return frames sent."""
+    """Send a log's frames onto ``bus`` at their recorded timing (like canplayer); return frames sent.
+
+    A frame without a finite timestamp has no place in time and is not sent; those and what could not be read
+    are warned about (logger ``canest.replay``)."""
     reader = open_log(log_path)
     try:
-        return play_messages(reader, bus, speed, progress, desc=f"play {Path(log_path).name}")
+        timed = (msg for msg in reader if math.isfinite(msg.timestamp))
+        sent = play_messages(timed, bus, speed, progress, desc=f"play {Path(log_path).name}")
     finally:
         reader.stop()
+    for warning in reader.warnings():
+        LOG.warning(warning)
+    if reader.frames > sent:
+        LOG.warning(f"{log_path}: {reader.frames - sent} frame(s) without a finite timestamp were not sent")
+    return sent
 
 
 def play_messages(messages, bus: can.BusABC, speed: float = 1.0, progress: bool = False, desc: str = "play",

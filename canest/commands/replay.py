@@ -5,7 +5,6 @@ import logging
 import math
 import signal
 import sys
-import threading
 from contextlib import contextmanager
 
 from canest.config import DEFAULT_CONFIG
@@ -61,23 +60,21 @@ def register(subparsers) -> None:
 
 
 class StopRequest:
-    """Set by the first SIGINT or SIGTERM (``is_set()`` as a ``threading.Event``); ``signal`` names it."""
+    """Set by the first SIGINT or SIGTERM (``is_set()``, as a ``threading.Event``); ``signal`` names it."""
 
     def __init__(self):
-        self.event = threading.Event()
         self.signal = None
 
     def is_set(self) -> bool:
-        return self.event.is_set()
+        return self.signal is not None
 
     @contextmanager
     def on_signals(self):
         """While inside: the first SIGINT or SIGTERM sets the request, a second one interrupts at once."""
         def handler(signum, frame):
-            if self.event.is_set():
+            if self.is_set():
                 raise KeyboardInterrupt
             self.signal = signal.Signals(signum).name
-            self.event.set()
 
         previous = {s: signal.signal(s, handler) for s in (signal.SIGINT, signal.SIGTERM)}
         try:
@@ -89,15 +86,19 @@ class StopRequest:
 
 def warnings_to_stderr() -> None:
     """The replay's warnings (damaged log, empty log) as ``canest: warning: ...`` lines on stderr."""
-    handler = logging.StreamHandler(sys.stderr)
-    handler.setFormatter(logging.Formatter("canest: warning: %(message)s"))
     logger = logging.getLogger("canest")
+    if any(handler.name == "canest-warnings" for handler in logger.handlers):
+        return
+    handler = logging.StreamHandler(sys.stderr)
+    handler.name = "canest-warnings"
+    handler.setFormatter(logging.Formatter("canest: warning: %(message)s"))
     logger.addHandler(handler)
     logger.propagate = False
 
 
 def run(args) -> int:
     config = config_from_args(args)
+    warnings_to_stderr()
     if args.realtime:
         if args.out or args.csv:
             raise UsageError("--realtime plays the log onto a bus; --out and --csv belong to offline replay")
@@ -115,7 +116,6 @@ def run(args) -> int:
     check_outputs({"--out": args.out, "--csv": args.csv},
                   {"the input log": args.log, "the config": args.config or DEFAULT_CONFIG,
                    "the input DBC": config.input_dbc, "the output DBC": config.output_dbc})
-    warnings_to_stderr()
     with StopRequest().on_signals() as stop:
         summary = replay(config, args.log, out_log=args.out, out_csv=args.csv, progress=not args.quiet, stop=stop)
     print(format_summary(summary))

@@ -162,7 +162,7 @@ def text_frames(path, kind: str, stream, damage):
     reader_class = TEXT_READERS[kind]
     feed = LineFeed(stream, damage, reader_class.is_metadata)
     reader = reader_class(feed)
-    while True:
+    while True:  # every entry of the reader's loop reads a line first, so each failure is a line further on
         try:
             for msg in reader:
                 feed.produced()
