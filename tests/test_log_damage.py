@@ -123,6 +123,17 @@ def test_a_gzip_compressed_log_with_a_bad_line(drive, tmp_path):
     assert len(list(source)) == len(drive) - 1 and source.damage.where == {"bad_lines": [3]}
 
 
+def test_a_cut_gzip_log_gives_the_lines_before_the_cut_and_says_so(drive, tmp_path):
+    packed = gzip.compress(write(drive, tmp_path / "d.log").read_bytes())
+    (tmp_path / "cut.log.gz").write_bytes(packed[:len(packed) // 2])
+    source = open_log(tmp_path / "cut.log.gz")
+    frames = list(source)
+    assert 0 < len(frames) < len(drive) and all(same_frame(a, b) for a, b in zip(frames, drive))
+    assert source.damage.counts["corrupt"] == 1
+    assert source.damage.stopped.startswith(f"decompression failed after line {source.damage.lines}, the rest is "
+                                            "unreadable (EOFError")
+
+
 def test_a_blf_cut_in_half_gives_its_first_frames_and_says_where_it_ends(config, drive, tmp_path, caplog):
     whole = write_blf(drive, tmp_path / "whole.blf")
     cut = tmp_path / "cut.blf"
