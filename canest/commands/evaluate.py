@@ -1,9 +1,10 @@
 """canest evaluate: RMSE and MAE of an estimate CSV against a truth CSV."""
 from __future__ import annotations
 
-from canest.errors import TableError
+from canest.errors import DependencyError, InputFileError, TableError
 from canest.commands.common import FORMATTER
 from canest.apps.evaluate import DISPLAY, format_table, plot, read_table, score
+from canest.io.outputs import OutputFile, check_outputs
 
 EPILOG = """example:
   canest evaluate est.csv truth.csv --plot est.png
@@ -25,8 +26,19 @@ def register(subparsers) -> None:
     p.set_defaults(func=run)
 
 
+def read_input(path) -> dict:
+    try:
+        return read_table(path)
+    except OSError as exc:
+        raise InputFileError(f"{path}: cannot read: {exc.strerror or exc}; name an existing CSV this user may read") \
+            from None
+
+
 def run(args) -> int:
-    estimate, truth = read_table(args.estimate), read_table(args.truth)
+    if args.plot:
+        DependencyError.require("matplotlib", "--plot", "pip install matplotlib")
+        check_outputs({"--plot": args.plot}, {"the estimate CSV": args.estimate, "the truth CSV": args.truth})
+    estimate, truth = read_input(args.estimate), read_input(args.truth)
     if args.states is None:
         states = [s for s in DISPLAY if s in estimate and s in truth]
     else:
@@ -38,6 +50,7 @@ def run(args) -> int:
     print(format_table(score(estimate, truth, states, only_valid=not args.all, skip=args.skip),
                        f"{args.estimate} vs {args.truth}"))
     if args.plot:
-        plot(estimate, truth, states, args.plot)
+        with OutputFile(args.plot) as path:
+            plot(estimate, truth, states, path)
         print(f"plot written to {args.plot}")
     return 0

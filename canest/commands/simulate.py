@@ -1,12 +1,15 @@
 """canest simulate: a simulated drive as a CAN log plus a truth CSV."""
 from __future__ import annotations
 
+import math
 import sys
 
 from tqdm import tqdm
 
+from canest.config import DEFAULT_CONFIG
 from canest.errors import UsageError
 from canest.commands.common import FORMATTER, add_config, config_from_args
+from canest.io.outputs import OutputFile, check_outputs
 from canest.sim.maneuvers import MANEUVERS
 from canest.sim.simulate import simulate
 
@@ -20,7 +23,13 @@ The log is encoded through the config's input DBC and signal map, each message
 at its DBC cycle time; its format follows the suffix (.log candump, .asc,
 .blf, .trc, .csv). The truth CSV has the estimate CSV's columns (t, vx, vy,
 beta, yaw_rate; SI units, rad) plus ax, ay, delta, and per wheel fx_, fy_,
-fz_, mu_, alpha_, kappa_, w_ (wheel speed, rad/s), torque_ (fl, fr, rl, rr)."""
+fz_, mu_, alpha_, kappa_, w_ (wheel speed, rad/s), torque_ (fl, fr, rl, rr).
+Both are written to a temporary file and renamed when complete; an existing
+file is replaced, an input (config, DBC) never."""
+
+
+MIN_SPEED_KMH = 2.0  # the car starts at the target speed; the plant is valid from 0.5 m/s (1.8 km/h)
+MAX_SPEED_KMH = 300.0
 
 
 def register(subparsers) -> None:
@@ -30,7 +39,8 @@ def register(subparsers) -> None:
     p.add_argument("--maneuver", "-m", choices=MANEUVERS, default="dlc",
                    help="dlc: ISO 3888-1 double lane change; slalom; sine: 4 s period steering; step; "
                         "launch: straight acceleration ramp with traction control (default dlc)")
-    p.add_argument("--speed", type=float, default=80.0, help="target speed in km/h (default 80)")
+    p.add_argument("--speed", type=float, default=80.0,
+                   help=f"target speed in km/h, {MIN_SPEED_KMH:g} to {MAX_SPEED_KMH:g} (default 80)")
     p.add_argument("--mu", default="0.85", help="road friction, one value or four (fl,fr,rl,rr) (default 0.85)")
     p.add_argument("--mu-jump", metavar="T:MU",
                    help="the friction changes to MU (one value or four) at T s, e.g. 6:0.35 (default: no change)")
@@ -78,13 +88,33 @@ def run(args) -> int:
     mu_jump = parse_mu_jump(args.mu_jump)
     if not 0.0 <= args.outliers < 1.0:
         raise UsageError(f"--outliers: a probability per sample in [0, 1), got {args.outliers}")
-    with tqdm(total=100, desc=f"simulate {args.maneuver}", unit="%", leave=False, disable=not sys.stderr.isatty()) as bar:
-        result = simulate(config, args.maneuver, args.speed, mu, duration=args.duration, amplitude_deg=args.amplitude,
-                          seed=args.seed, noise_scale=args.noise_scale, outliers=args.outliers,
-                          start_time=args.start_time, channel=config.input_bus.channel,
-                          progress=lambda f: bar.update(round(100 * f) - bar.n), mu_jump=mu_jump)
-    result.write_log(args.out)
-    result.write_truth(args.truth)
+    if not MIN_SPEED_KMH <= args.speed <= MAX_SPEED_KMH:  # also refuses nan
+        raise UsageError(f"--speed: a target speed from {MIN_SPEED_KMH:g} to {MAX_SPEED_KMH:g} km/h, got {args.speed}")
+    if args.duration is not None and not (math.isfinite(args.duration) and args.duration > 0):
+        raise UsageError(f"--duration: seconds above 0, got {args.duration}")
+    check_outputs({"--out": args.out, "--truth": args.truth},
+                  {"the config": args.config or DEFAULT_CONFIG, "the input DBC": config.input_dbc,
+                   "the output DBC": config.output_dbc})
+    outputs = []  # staged: created now (a folder that cannot take them fails before the simulation), renamed at the end
+    try:
+        for path in (args.out, args.truth):
+            outputs.append(OutputFile(path))
+        with tqdm(total=100, desc=f"simulate {args.maneuver}", unit="%", leave=False,
+                  disable=not sys.stderr.isatty()) as bar:
+            result = simulate(config, args.maneuver, args.speed, mu, duration=args.duration,
+                              amplitude_deg=args.amplitude, seed=args.seed, noise_scale=args.noise_scale,
+                              outliers=args.outliers, start_time=args.start_time, channel=config.input_bus.channel,
+                              progress=lambda f: bar.update(round(100 * f) - bar.n), mu_jump=mu_jump)
+        for output, write in zip(outputs, (result.write_log, result.write_truth)):
+            try:
+                write(output.write_path)
+            except OSError as exc:
+                raise output.error(exc) from None
+        for output in outputs:
+            output.commit()
+    finally:
+        for output in outputs:
+            output.discard()
     duration = result.truth["t"][-1] - result.truth["t"][0]
     print(f"wrote {len(result.frames)} frames ({duration:.1f} s) to {args.out} and truth to {args.truth}")
     return 0

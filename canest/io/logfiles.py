@@ -1,53 +1,139 @@
-"""Where logged frames come from: python-can's readers, chosen by file suffix.
+"""Where logged frames come from: python-can's readers, chosen by file suffix, read as far as they can.
 
-``.log`` (candump), ``.asc``, ``.blf``, ``.trc``, ``.csv``, ... : any format
-python-can reads. A file that is missing, of an unknown format or
-unreadable is a :class:`~canest.errors.LogError` naming the file (and the
-frame number where reading stopped).
+``.log`` (candump), ``.asc``, ``.trc``, ``.csv`` (each also ``.gz``-compressed),
+``.blf``, and whatever else python-can reads (``.db``, ``.mf4``, plug-ins).
+:func:`open_log` gives a :class:`LogSource`: iterate it for the frames. What
+cannot be read does not end the replay: a text line python-can cannot parse is
+skipped and counted (:mod:`canest.io.textlogs`), a truncated or corrupt binary
+log ends where it can no longer be decoded (:mod:`canest.io.blflogs`), and
+:attr:`LogSource.damage` holds it all, by cause, for the frame summary and the
+warnings. A log of which nothing at all could be read is a
+:class:`~canest.errors.LogError` (exit 65); a missing or forbidden one an
+:class:`~canest.errors.InputFileError` (66); a read that fails midway (a device
+error) a :class:`~canest.errors.FileIOError` (74).
 """
 from __future__ import annotations
 
-import struct
+import gzip
+import logging
+import threading
 from pathlib import Path
 
 import can
 
-from canest.errors import LogError
+from canest.errors import CanestError, DependencyError, FileIOError, InputFileError, LogError
+from canest.io.blflogs import blf_frames
+from canest.io.damage import LogDamage
+from canest.io.textlogs import TEXT_READERS, text_frames
 
 
-def open_log(path) -> can.LogReader:
-    path = Path(path)
-    if not path.is_file():
-        raise LogError(f"{path}: log file not found")
+def log_format(path: Path):
+    """(the format's suffix, whether the file is gzip-compressed): ``drive.asc.gz`` -> (``.asc``, True)."""
+    suffixes = [s.lower() for s in path.suffixes]
+    if suffixes and suffixes[-1] == ".gz":
+        return (suffixes[-2] if len(suffixes) > 1 else ""), True
+    return (suffixes[-1] if suffixes else ""), False
+
+
+class ReaderWarnings(logging.Handler):
+    """python-can's readers log what they skip (an unknown BLF compression, ...): count it as damage."""
+
+    def __init__(self, damage: LogDamage):
+        super().__init__(logging.WARNING)
+        self.damage = damage
+        self.thread = threading.get_ident()  # batch replays several logs at once, one per thread
+
+    def emit(self, record) -> None:
+        if record.thread == self.thread:
+            self.damage.note("reader_warnings", record.getMessage())
+
+
+class LogSource:
+    """A log's frames (iterate once), ``damage`` (what could not be read), ``position()`` (bytes read, for progress)."""
+
+    def __init__(self, path):
+        self.path = Path(path)
+        self.damage = LogDamage(self.path)
+        self.frames = 0
+        if self.path.is_dir():
+            raise InputFileError(f"{self.path}: that is a folder; name a log file")
+        if not self.path.exists():
+            raise InputFileError(f"{self.path}: log file not found")
+        kind, compressed = log_format(self.path)
+        try:
+            self.handle = open(self.path, "rb")
+            stream = gzip.GzipFile(fileobj=self.handle) if compressed else self.handle
+        except OSError as exc:
+            raise InputFileError(f"{self.path}: cannot read: {exc.strerror}; check that the file may be read "
+                                 "by this user") from None
+        if kind in TEXT_READERS:
+            self.reader = None
+            self._frames = text_frames(self.path, kind, stream, self.damage)
+        elif kind == ".blf":
+            self.reader = None
+            self._frames = blf_frames(self.path, stream, None if compressed else self.path.stat().st_size, self.damage)
+        else:
+            self.handle.close()
+            self.reader = python_can_reader(self.path)
+            self._frames = until_unreadable(self.reader, self.damage)
+
+    def __iter__(self):
+        warnings = ReaderWarnings(self.damage)
+        logging.getLogger("can.io").addHandler(warnings)
+        try:
+            for msg in self._frames:
+                self.frames += 1
+                yield msg
+        except OSError as exc:
+            raise FileIOError(f"{self.path}: cannot read: {exc.strerror or exc}; check the disk or device, or "
+                              "copy the log elsewhere") from None
+        finally:
+            logging.getLogger("can.io").removeHandler(warnings)
+        if not self.frames and self.damage:
+            raise LogError(f"{self.path}: no frame could be read: {self.damage.descriptions()[0]}")
+
+    def position(self) -> int:
+        """Bytes of the file read so far (0 where python-can reads the file itself)."""
+        return 0 if self.handle.closed else self.handle.tell()
+
+    def warnings(self) -> list:
+        """One line per cause of what could not be read, and a line for a log without frames."""
+        empty = [] if self.frames else [f"{self.path}: the log holds no CAN frames; the outputs have no ticks"]
+        return self.damage.warnings() + empty
+
+    def stop(self) -> None:
+        if self.reader is not None:
+            self.reader.stop()
+        self.handle.close()
+
+
+def python_can_reader(path: Path):
+    """python-can's reader for any other suffix (``.db``, ``.mf4``, a plug-in's)."""
     try:
         return can.LogReader(str(path))
+    except (ImportError, NotImplementedError) as exc:  # the MF4 reader without asammdf
+        raise DependencyError(f"{path}: {exc}") from None
     except ValueError as exc:
-        raise LogError(f"{path}: {exc}") from None
-
-
-def byte_position(reader):
-    """A callable giving how far into its file ``reader`` is, or None if it cannot tell."""
-    handle = getattr(reader, "file", None)
-    handle = getattr(handle, "buffer", handle)  # text readers: the binary buffer can still tell
-    if handle is None or not hasattr(handle, "tell"):
-        return None
-    try:
-        handle.tell()
+        raise LogError(f"{path}: {exc}; canest reads .log (candump), .asc, .blf, .trc, .csv (also .gz), .db, .mf4") \
+            from None
     except OSError:
-        return None
-    return handle.tell
+        raise
+    except Exception as exc:
+        raise LogError(f"{path}: not readable as a {path.suffix} log ({type(exc).__name__}: {exc})") from None
 
 
-def frames(reader, log_path):
-    """The reader's frames; a frame it cannot parse ends the replay with the file and frame number."""
-    count = 0
-    iterator = iter(reader)
-    while True:
-        try:
-            msg = next(iterator)
-        except StopIteration:
-            return
-        except (ValueError, IndexError, KeyError, struct.error) as exc:
-            raise LogError(f"{log_path}: frame {count + 1} is unreadable ({type(exc).__name__}: {exc})") from None
-        count += 1
-        yield msg
+def until_unreadable(reader, damage: LogDamage):
+    """python-can's frames until it cannot read on; that is reported with the number of frames read."""
+    frames = 0
+    try:
+        for msg in reader:
+            frames += 1
+            yield msg
+    except (CanestError, OSError):
+        raise
+    except Exception as exc:
+        damage.stop("corrupt", 0, f"corrupt: reading stopped after {frames} frames ({type(exc).__name__}: {exc})")
+
+
+def open_log(path) -> LogSource:
+    return LogSource(path)

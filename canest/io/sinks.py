@@ -2,7 +2,9 @@
 
 Every sink gets each tick's estimates in order through :meth:`Sink.publish`
 (a list: after a stall several ticks complete at once) and is closed at the
-end. The live service and replay both just iterate over their sinks:
+end: :meth:`Sink.close` after a run that ended well, :meth:`Sink.abort`
+after one that failed. The live service and replay both just iterate over
+their sinks:
 
 - :class:`CsvSink`: one row per tick (every tick);
 - :class:`LogSink`: the estimate frames of every tick into a CAN log, its
@@ -10,6 +12,13 @@ end. The live service and replay both just iterate over their sinks:
 - :class:`BusSink`: the newest tick's frames onto a bus link, never a burst
   (older ticks of the same pass are counted ``superseded``);
 - :class:`CallbackSink`: a function called with every estimate.
+
+The file sinks write through :class:`~canest.io.outputs.OutputFile`:
+``staged=True`` (replay) writes a temporary file that only a clean close
+renames to the final name; ``staged=False`` (the live service, whose CSV is
+followed while it runs) writes in place and keeps what was written. Either
+way a failing disk is one line naming the file (exit 73 or 74), never a
+traceback.
 
 Frame sinks take an encoder (anything with ``encode(estimate) -> [can.Message]``).
 """
@@ -19,7 +28,9 @@ import csv
 
 import can
 
+from canest.errors import DependencyError, UsageError
 from canest.estimation.estimate import CAUSE_GROUPS
+from canest.io.outputs import OutputFile
 
 
 class Sink:
@@ -33,50 +44,114 @@ class Sink:
     def close(self) -> None:
         """Flush and release what the sink holds (nothing by default)."""
 
+    def abort(self) -> None:
+        """Release what the sink holds after a failed run (by default as :meth:`close`)."""
+        self.close()
+
     def __enter__(self):
         return self
 
-    def __exit__(self, *exc):
-        self.close()
+    def __exit__(self, exc_type, *exc):
+        if exc_type is None:
+            self.close()
+        else:
+            self.abort()
 
 
-class CsvSink(Sink):
+class FileSink(Sink):
+    """A sink writing one :class:`OutputFile`; an ``OSError`` becomes a one-line error naming the file."""
+
+    def __init__(self, path, staged: bool):
+        self.output = OutputFile(path, staged)
+
+    def write(self, estimate) -> None:
+        try:
+            self._write(estimate)
+        except OSError as exc:
+            raise self.output.error(exc) from None
+
+    def _write(self, estimate) -> None:
+        raise NotImplementedError
+
+    def _release(self) -> None:
+        """Flush and close the file."""
+        raise NotImplementedError
+
+    def close(self) -> None:
+        try:
+            self._release()
+        except OSError as exc:
+            self.output.discard()
+            raise self.output.error(exc) from None
+        self.output.commit()
+
+    def abort(self) -> None:
+        try:
+            self._release()
+        except OSError:
+            pass  # the run failed already; that error is the one to report
+        self.output.discard()
+
+
+class CsvSink(FileSink):
     """One row per tick: ``t``, the states, their ``_std`` columns, ``valid`` (bit mask), ``mode`` and
     ``why_vx``, ``why_yaw_rate``, ``why_beta``, ``why_forces``, ``why_friction`` (why a bit is clear).
 
     ``valid`` bits: 0 vx, 1 vy, 2 beta, 3 yaw rate, 4 lateral forces, 5 friction, 6 friction observable now,
     7-10 lateral force fl, fr, rl, rr, 11-14 friction fl, fr, rl, rr (``canest.estimation.estimate.VALID_BITS``).
+    Given ``states``, the header is written at once, so a run without a tick still leaves a CSV with its header;
+    otherwise the first estimate's states make it.
     """
 
-    def __init__(self, path):
-        self.handle = open(path, "w", newline="")
-        self.writer = csv.writer(self.handle)
-        self.columns = None
+    def __init__(self, path, states=(), staged: bool = False):
+        super().__init__(path, staged)
+        try:
+            self.handle = open(self.output.write_path, "w", newline="")
+            self.writer = csv.writer(self.handle)
+            self.columns = None
+            if states:
+                self._header(list(states))
+        except OSError as exc:
+            self.output.discard()
+            raise self.output.error(exc) from None
 
-    def write(self, estimate) -> None:
+    def _header(self, states: list) -> None:
+        self.columns = states + [f"{k}_std" for k in states]
+        self.writer.writerow(["t", *self.columns, "valid", "mode", *(f"why_{g}" for g in CAUSE_GROUPS)])
+
+    def _write(self, estimate) -> None:
         if self.columns is None:
-            states = [k for k in estimate.values if not k.endswith("_std")]
-            self.columns = states + [f"{k}_std" for k in states]
-            self.writer.writerow(["t", *self.columns, "valid", "mode", *(f"why_{g}" for g in CAUSE_GROUPS)])
+            self._header([k for k in estimate.values if not k.endswith("_std")])
         self.writer.writerow([f"{estimate.t:.6f}", *(f"{estimate.values[c]:.9g}" for c in self.columns),
                               estimate.valid_flags, estimate.mode, *(estimate.causes.get(g, "") for g in CAUSE_GROUPS)])
 
-    def close(self) -> None:
+    def _release(self) -> None:
         self.handle.close()
 
 
-class LogSink(Sink):
+class LogSink(FileSink):
     """Every tick's estimate frames into a CAN log (``.log`` candump, ``.asc``, ``.blf``, ... by suffix)."""
 
-    def __init__(self, path, encoder):
-        self.logger = can.Logger(str(path))
+    def __init__(self, path, encoder, staged: bool = False):
+        super().__init__(path, staged)
         self.encoder = encoder
+        try:
+            self.logger = can.Logger(str(self.output.write_path))
+        except (ImportError, NotImplementedError) as exc:  # python-can's MF4 writer without asammdf
+            self.output.discard()
+            raise DependencyError(f"{path}: {exc}") from None
+        except ValueError as exc:
+            self.output.discard()
+            raise UsageError(f"{path}: {exc}; name a log python-can writes (.log, .asc, .blf, .trc, .csv)") from None
+        except OSError as exc:
+            self.output.discard()
+            raise self.output.error(exc) from None
 
-    def write(self, estimate) -> None:
+    def _write(self, estimate) -> None:
         for frame in self.encoder.encode(estimate):
             self.logger.on_message_received(frame)
 
-    def close(self) -> None:
+    def _release(self) -> None:
         self.logger.stop()
 
 

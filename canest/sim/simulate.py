@@ -17,6 +17,7 @@ import can
 import numpy as np
 
 from canest.codec.encode import InputEncoder
+from canest.errors import SimulationError
 from canest.settings import Config
 from canest.signals import WHEELS
 from canest.sim.maneuvers import Driver, make_maneuver
@@ -103,7 +104,9 @@ def simulate(config: Config, maneuver: str, speed_kmh: float, mu, *, duration=No
                 frames.append(encoder.encode(frame_id, measured, start_time + t, channel))
                 heapq.heappush(schedule, (due + cycle, frame_id, cycle))
         if not np.all(np.isfinite(state)) or state[VX] < 0.5:
-            raise RuntimeError(f"plant left its valid range at t={t:.3f} s (vx={state[VX]:.2f} m/s)")
+            raise SimulationError(f"the simulated car left the plant's valid range at t={t:.3f} s (vx={state[VX]:.2f} "
+                                  "m/s, at least 0.5 m/s and finite): ask for a speed of at least 2 km/h, or a gentler "
+                                  "maneuver (--amplitude) or more grip (--mu)")
         state = plant.step(state, delta, torque, PLANT_DT)
         if progress is not None and k % 1000 == 0:
             progress(k / steps)
