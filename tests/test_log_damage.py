@@ -190,7 +190,8 @@ def test_an_empty_log_gives_a_csv_with_its_header_and_a_warning(config, tmp_path
         summary = replay(config, log, out_csv=tmp_path / "est.csv", progress=False)
     assert summary["frames"] == 0
     assert (tmp_path / "est.csv").read_text().splitlines() == [
-        "t,vx,vy,beta,yaw_rate,vx_std,vy_std,beta_std,yaw_rate_std,valid,mode"]
+        "t,vx,vy,beta,yaw_rate,vx_std,vy_std,beta_std,yaw_rate_std,valid,mode,"
+        "why_vx,why_yaw_rate,why_beta,why_forces,why_friction"]
     assert "the log holds no CAN frames" in caplog.text
 
 

@@ -22,9 +22,11 @@ EPILOG = """examples:
 
 Offline, the log is read as fast as possible and every frame is accounted for
 in the summary printed at the end (decoded, ignored by ID, rejected by cause).
-The CSV has one row per tick: t, vx, vy, beta, yaw_rate (SI units, rad), their
-_std columns, valid (bit mask: 0 vx, 1 vy, 2 beta, 3 yaw rate, 4 forces,
-5 friction) and mode.
+The CSV has one row per tick: t, vx, vy, beta, yaw_rate (SI units, rad) and
+the model's forces and frictions, their _std columns, valid (bit mask: 0 vx,
+1 vy, 2 beta, 3 yaw rate, 4 forces, 5 friction, 6 friction observable,
+7-14 per-wheel forces and frictions), mode and why_vx, why_yaw_rate,
+why_beta, why_forces, why_friction (why a bit is clear).
 
 Damaged logs: a line python-can cannot parse is skipped and counted
 (log_bad_lines, log_torn_line for a last line cut mid-write, log_junk_lines
