@@ -154,7 +154,9 @@ class InputDecoder:
                 self.last_saturated.add(spec.canonical)
                 self.counts["saturated_samples"] += 1
             out.append((spec.canonical, spec.factor * raw + spec.offset))
-        if not self.plausible.accept(out, msg.timestamp):
+        plausible = self.plausible.accept(out, msg.timestamp)
+        if out and not plausible:
             return self._reject("implausible")
+        self.counts["implausible_samples"] += len(out) - len(plausible)
         self.counts["decoded"] += 1
-        return out
+        return plausible

@@ -63,17 +63,18 @@ def _true_inputs(state, outputs, swa, torque) -> dict:
 
 def simulate(config: Config, maneuver: str, speed_kmh: float, mu, *, duration=None, amplitude_deg=None,
              seed: int = 0, noise_scale: float = 1.0, outliers: float = 0.0, start_time: float = 0.0,
-             channel: str = "vcan0", progress=None, mu_jump=None) -> Simulation:
+             channel: str = "vcan0", progress=None, mu_jump=None, vibration: float = 0.0) -> Simulation:
     """Simulate one run; ``mu`` is a scalar or four per-wheel friction coefficients.
 
     ``mu_jump = (t, mu)``: the road's friction changes to ``mu`` (scalar or four) at ``t`` s into the run.
+    ``vibration``: scale of the IMU's body vibration and road spikes (:mod:`canest.sim.sensors`; 0 none).
     """
     rng = np.random.default_rng(seed)
     speed = speed_kmh / 3.6
     plan = make_maneuver(maneuver, speed, amplitude_deg, duration)
     plant = TwoTrackPlant(config.vehicle, mu)
     driver = Driver(config.vehicle, plan, speed)
-    sensors = SensorModel(rng, noise_scale, outliers)
+    sensors = SensorModel(rng, noise_scale, outliers, vibration=vibration)
     encoder = InputEncoder(config)
     state = plant.initial_state(speed)
     state[X] = plan.start_x
@@ -100,7 +101,7 @@ def simulate(config: Config, maneuver: str, speed_kmh: float, mu, *, duration=No
             true_values = _true_inputs(state, outputs, swa, torque)
             while schedule[0][0] <= t:
                 due, frame_id, cycle = heapq.heappop(schedule)
-                measured = {name: sensors.measure(name, value) for name, value in true_values.items()}
+                measured = {name: sensors.measure(name, value, t) for name, value in true_values.items()}
                 frames.append(encoder.encode(frame_id, measured, start_time + t, channel))
                 heapq.heappush(schedule, (due + cycle, frame_id, cycle))
         if not np.all(np.isfinite(state)) or state[VX] < 0.5:
