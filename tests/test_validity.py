@@ -7,12 +7,14 @@ import pytest
 from scipy.stats import truncnorm
 
 from canest.apps.replay import replay
+from canest.config import load_config
 from canest.codec.encode import EstimateEncoder
 from canest.estimation import validity
 from canest.estimation.estimate import CAUSES, Estimate
 from canest.filters.parameters import truncated
 from canest.sim.simulate import simulate
 from tests.conftest import ROOT
+from tests.test_config import write_variant
 
 OUTPUT_DBC = ROOT / "dbc" / "canest_estimates.dbc"
 
@@ -79,9 +81,14 @@ def test_the_cause_message_carries_every_cause_the_dbc_documents():
         ("valid", "inconsistent", "model_regime", "no_input")
 
 
-def test_a_wheel_speed_at_its_dbc_limit_is_saturated_not_a_speed(config, tmp_path):
-    """Above what the wheel-speed signal carries (1600 rpm) the DBC limit is sent: vx is not taken from it,
-    its bit is clear with the cause "saturated", and it never publishes the limit as a valid speed."""
+def test_a_wheel_speed_at_its_dbc_limit_is_saturated_not_a_speed(tmp_path):
+    """Above what the wheel-speed signal carries the DBC limit is sent: vx is not taken from it, its bit is
+    clear with the cause "saturated", and it never publishes the limit as a valid speed. (canest's own DBC
+    carries 3200 rpm, 420 km/h at 0.35 m; a DBC capped at 1600 rpm, as canest's was, shows the case.)"""
+    path = write_variant(tmp_path, lambda d: None)
+    dbc = tmp_path / "dbc" / "canest_vehicle.dbc"
+    dbc.write_text(dbc.read_text().replace("(0.1,0) [-3200|3200]", "(0.05,0) [-1600|1600]"))
+    config = load_config(path)
     limit = 1600 * 2 * math.pi / 60 * config.vehicle.wheel_radius
     sim = simulate(config, "launch", limit * 3.6 - 12.0, 0.85, duration=5.0, seed=2)  # accelerates past the limit
     sim.write_log(tmp_path / "fast.log")
