@@ -109,9 +109,9 @@ class Consistency:
         for row, value in zip(rows, d):
             self.windows[self.names[row]].append(float(value))
 
-    def ratio(self, state: str) -> float:
-        """The largest windowed mean of d over the channels observing ``state`` (nan: none judged yet)."""
-        means = [sum(w) / len(w) for name in OBSERVED_BY[state] if len(w := self.windows.get(name, ())) >= MIN_SAMPLES]
+    def ratio(self, state: str, min_samples: int = MIN_SAMPLES) -> float:
+        """The largest windowed mean of d over the channels observing ``state`` (nan: none has ``min_samples``)."""
+        means = [sum(w) / len(w) for name in OBSERVED_BY[state] if len(w := self.windows.get(name, ())) >= min_samples]
         return max(means) if means else math.nan
 
 
