@@ -44,6 +44,7 @@ from canest.estimation import channels as ch
 from canest.estimation import validity
 from canest.estimation.estimate import OUTPUT_STATES, Estimate
 from canest.estimation.inputs import WHEEL_SPEEDS, TickInputs
+from canest.estimation.judge import DIVERGENCE_NIS, StateJudge
 from canest.estimation.reference_speed import ReferenceSpeed
 from canest.filters import Transition, make_filter
 from canest.filters.base import central_difference_jacobian
@@ -56,8 +57,6 @@ TORQUES = INPUT_GROUPS["motor_torques"]
 
 log = logging.getLogger("canest.estimator")
 
-DIVERGENCE_NIS = 30.0
-MEASURED_DIRECTLY = ("yaw_rate", "vx")
 DIVERGENCE_HOLD = 1.0  # s
 PER_WHEEL_KEYS = {"fy_": "lateral_force", "w_": "wheel_speed", "wheel_speed_": "wheel_speed", "mu_": "friction"}
 
@@ -103,30 +102,21 @@ class Estimator:
                                 getattr(model, "transition_low_speed_jacobian", None)),
         }
         self.latency_compensation = self.est.latency_compensation
-        self.consistency = validity.Consistency(model.measurement_names)
+        self.judge = StateJudge(model, config.vehicle, self.dt)
         self.geometry = WheelGeometry(config.vehicle)
         self.reference_speed = ReferenceSpeed(self.vehicle.wheel_radius, self.vehicle.tire.longitudinal_stiffness,
                                               self.est.measurement_noise["vx_reference"])
         self.reference_wheel_acceleration = WheelAcceleration()
-        self.holds = validity.Holds()
-        # a model that estimates friction covers saturation itself; the others are judged by the linear regime
-        self.regime = None if getattr(model, "parameters", 0) else validity.LinearRegime(config.vehicle, self.dt)
-        self.kinematic = validity.KinematicCheck(self.dt)
-        self.gyros = [n for n in validity.OBSERVED_BY["yaw_rate"] if n in model.measurement_names]  # the measured ones
 
     def reset(self) -> None:
         """Forget the state: the next tick with inputs initializes a new filter."""
         self.filter = None
-        self.consistency.reset()
+        self.judge.reset()
         self.reference_wheel_acceleration.reset()
-        self.kinematic.reset()
-        if self.regime is not None:
-            self.regime.reset()
 
     def _diverged(self, t: float) -> bool:
         """True when the gyro or the speed channel disagrees with the prior beyond ``DIVERGENCE_NIS``, windowed."""
-        ratios = [self.consistency.ratio(state, validity.WINDOW) for state in MEASURED_DIRECTLY]
-        worst = max((r for r in ratios if r == r), default=0.0)
+        worst = self.judge.divergence()
         if worst <= DIVERGENCE_NIS:
             return False
         log.warning("filter diverged (mean NIS %.0f of a directly measured state over %d samples): reset", worst,
@@ -210,14 +200,6 @@ class Estimator:
         """Measurement update with the fresh samples; True if the filter has diverged."""
         return self._apply(channels, u, t)
 
-    def _judge(self, channels: ch.Channels, u: np.ndarray, x_prior: np.ndarray, P_prior: np.ndarray) -> None:
-        """Record each usable channel's consistency with the prior under the configured noise."""
-        rows = np.flatnonzero(channels.mask)
-        if rows.size:
-            measurement = ch.rows_measurement(self.model, rows, channels.ages, False)
-            d = validity.normalized_innovations(measurement, x_prior, P_prior, u, channels.z[rows], channels.std[rows])
-            self.consistency.push(rows, d)
-
     def step(self, sample) -> Estimate:
         """One tick on the resampler's ``sample``."""
         t = sample.t
@@ -234,7 +216,7 @@ class Estimator:
         self.filter.predict(self.transitions[self.low_speed], u, self.dt, self.Q)
         lateral_ok = not self.low_speed and inputs.has("steering_wheel_angle", "ay")
         channels = self._channels(inputs, t, lateral_ok)
-        self._judge(channels, u, self.filter.x.copy(), self.filter.P.copy())
+        self.judge.record(channels, u, self.filter.x.copy(), self.filter.P.copy())
         diverged = self._update(channels, inputs, u, lateral_ok, t)
         if self.step_times is not None:
             self.step_times.append(time.perf_counter() - started)
@@ -266,14 +248,10 @@ class Estimator:
             cause = "no_input" if mode == "no_input" else "initializing"
             return Estimate(t, values, {}, mode, self.est.filter, missing=missing, resets=self.resets,
                             causes={name: cause for name in validity.GROUPS})
-        x, P = self.filter.x, self.filter.P
-        std = np.sqrt(np.maximum(np.diag(P), 0.0))
-        ratio = {state: self.consistency.ratio(state) for state in validity.OBSERVED_BY}
-        std[self.yaw] *= validity.inflation(ratio["yaw_rate"])
-        std[self.vx] *= validity.inflation(ratio["vx"])
-        std[self.beta] = math.hypot(std[self.beta] * validity.inflation(ratio["beta"]),
-                                    validity.sideslip_model_std(self.vehicle, inputs.current("ay"),
-                                                                  getattr(self.model, "linear_tires", False)))
+        x = self.filter.x
+        ratios = self.judge.ratios()
+        index = {"yaw_rate": self.yaw, "vx": self.vx, "beta": self.beta}
+        std = self.judge.widen(np.sqrt(np.maximum(np.diag(self.filter.P), 0.0)), index, ratios, inputs.current("ay"))
         vx, beta = x[self.vx], x[self.beta]
         values = {
             "vx": vx, "vy": vx * math.tan(beta), "beta": beta, "yaw_rate": x[self.yaw],
@@ -281,38 +259,10 @@ class Estimator:
                                                          math.tan(beta) * std[self.vx]),
             "beta_std": std[self.beta], "yaw_rate_std": std[self.yaw],
         }
-        causes = {
-            "yaw_rate": validity.judge(any(inputs.has(n) for n in self.gyros), inputs.saturated("yaw_rate"),
-                                       ratio["yaw_rate"]),
-            "vx": self._vx_cause(inputs, ratio["vx"], std[self.vx]),
-            "beta": self._lateral_cause(mode, inputs, lateral_ok, ratio["beta"], t),
-        }
-        causes = {state: self.holds.apply(state, cause, t) for state, cause in causes.items()}
+        lateral = {"low_speed": mode == "low_speed", "after_reset": mode == "degraded" and t < self.suspect_until,
+                   "lateral_ok": lateral_ok, "beta": beta, "vx": vx, "delta": self._road_wheel_angle(inputs)}
+        causes = self.judge.causes(inputs, ratios, std[self.vx], lateral, t)
         valid = {name: causes[name] == "valid" for name in causes}
         valid["vy"] = valid["beta"] and valid["vx"]
         self._extra_values(values, valid, causes, std, inputs, lateral_ok)
         return Estimate(t, values, valid, mode, self.est.filter, self.filter.nis, missing, self.resets, causes)
-
-    def _vx_cause(self, inputs: TickInputs, ratio: float, vx_std: float) -> str:
-        cause = validity.judge(inputs.has(*WHEEL_SPEEDS) or inputs.has("ax"),
-                               any(inputs.saturated(w) for w in WHEEL_SPEEDS), ratio)
-        if cause == "valid" and vx_std > validity.VX_VALID_STD:
-            return "uncertain"
-        return cause
-
-    def _lateral_cause(self, mode: str, inputs: TickInputs, lateral_ok: bool, ratio: float, t: float) -> str:
-        """Why sideslip (and the lateral forces) are not valid, or "valid"."""
-        if mode == "low_speed":
-            return "low_speed"
-        if mode == "degraded" and t < self.suspect_until:
-            return "after_reset"
-        present = lateral_ok and inputs.has(*WHEEL_SPEEDS)
-        saturated = any(inputs.saturated(n) for n in ("ay", "steering_wheel_angle", "yaw_rate"))
-        cause = validity.judge(present, saturated, ratio)
-        if cause != "valid":
-            self.kinematic.reset()
-            return cause
-        x, yaw_rate = self.filter.x, inputs.values["yaw_rate"]
-        moving_as_measured = self.kinematic.inside(x[self.beta], inputs.values["ay"], yaw_rate, x[self.vx])
-        in_regime = self.regime is None or self.regime.inside(self._road_wheel_angle(inputs), x[self.vx], yaw_rate)
-        return "valid" if moving_as_measured and in_regime else "model_regime"

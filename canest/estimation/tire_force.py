@@ -78,7 +78,7 @@ class TireForceEstimator(Estimator):
                       lateral_ok: bool) -> None:
         """The forces are valid where sideslip is (they are judged by the same lateral channels) and torques are in."""
         cause = causes["beta"] if causes["beta"] != "valid" or inputs.has(*TORQUES) else "no_input"
-        inflation = validity.inflation(self.consistency.ratio("beta"))
+        inflation = validity.inflation(self.judge.consistency.ratio("beta"))
         for name, force, force_std in zip(LATERAL_FORCES, self.filter.x[tire_force.FY], std[tire_force.FY]):
             values[name], values[f"{name}_std"] = force, force_std * inflation
             valid[name] = cause == "valid"

@@ -1,0 +1,100 @@
+"""The judge of one estimator: which published states are valid, why not, and how far to widen their std.
+
+It owns the tests of :mod:`canest.estimation.validity` for one model (the
+channel consistency, the holds, the linear-regime and kinematic sideslip
+checks) and answers the tick core (:mod:`canest.estimation.core`) three
+questions: is a directly measured state diverging (reset), what standard
+deviations to publish, and the cause of each state's bit.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from canest.estimation import channels as ch
+from canest.estimation import validity
+from canest.estimation.inputs import WHEEL_SPEEDS
+
+DIVERGENCE_NIS = 30.0  # windowed mean NIS of a directly measured state above which the filter is reset
+MEASURED_DIRECTLY = ("yaw_rate", "vx")
+
+
+class StateJudge:
+    def __init__(self, model, vehicle, dt: float):
+        self.model = model
+        self.vehicle = vehicle
+        self.consistency = validity.Consistency(model.measurement_names)
+        self.holds = validity.Holds()
+        # a model that estimates friction covers saturation itself; the others are judged by the linear regime
+        self.regime = None if getattr(model, "parameters", 0) else validity.LinearRegime(vehicle, dt)
+        self.kinematic = validity.KinematicCheck(dt)
+        self.gyros = [n for n in validity.OBSERVED_BY["yaw_rate"] if n in model.measurement_names]  # the measured ones
+        self.linear_tires = getattr(model, "linear_tires", False)
+
+    def reset(self) -> None:
+        self.consistency.reset()
+        self.kinematic.reset()
+        if self.regime is not None:
+            self.regime.reset()
+
+    def record(self, channels: ch.Channels, u: np.ndarray, x_prior: np.ndarray, P_prior: np.ndarray) -> None:
+        """Each usable channel's consistency with the prior under the configured noise."""
+        rows = np.flatnonzero(channels.mask)
+        if rows.size:
+            measurement = ch.rows_measurement(self.model, rows, channels.ages, False)
+            d = validity.normalized_innovations(measurement, x_prior, P_prior, u, channels.z[rows], channels.std[rows])
+            self.consistency.push(rows, d)
+
+    def divergence(self) -> float:
+        """The worst windowed mean NIS of a directly measured state over a full window (0 before one is full)."""
+        ratios = [self.consistency.ratio(state, validity.WINDOW) for state in MEASURED_DIRECTLY]
+        return max((r for r in ratios if r == r), default=0.0)
+
+    def ratios(self) -> dict:
+        return {state: self.consistency.ratio(state) for state in validity.OBSERVED_BY}
+
+    def widen(self, std: np.ndarray, index: dict, ratios: dict, ay: float) -> np.ndarray:
+        """The published std: each state's by its channels' consistency, sideslip with its model error."""
+        std = std.copy()
+        std[index["yaw_rate"]] *= validity.inflation(ratios["yaw_rate"])
+        std[index["vx"]] *= validity.inflation(ratios["vx"])
+        std[index["beta"]] = math.hypot(std[index["beta"]] * validity.inflation(ratios["beta"]),
+                                        validity.sideslip_model_std(self.vehicle, ay, self.linear_tires))
+        return std
+
+    def causes(self, inputs, ratios: dict, vx_std: float, lateral: dict, t: float) -> dict:
+        """Cause per state (held for ``validity.HOLD``); ``lateral`` describes the sideslip's situation."""
+        causes = {
+            "yaw_rate": validity.judge(any(inputs.has(n) for n in self.gyros), inputs.saturated("yaw_rate"),
+                                       ratios["yaw_rate"]),
+            "vx": self._vx_cause(inputs, ratios["vx"], vx_std),
+            "beta": self._lateral_cause(inputs, ratios["beta"], **lateral),
+        }
+        return {state: self.holds.apply(state, cause, t) for state, cause in causes.items()}
+
+    @staticmethod
+    def _vx_cause(inputs, ratio: float, vx_std: float) -> str:
+        cause = validity.judge(inputs.has(*WHEEL_SPEEDS) or inputs.has("ax"),
+                               any(inputs.saturated(w) for w in WHEEL_SPEEDS), ratio)
+        if cause == "valid" and vx_std > validity.VX_VALID_STD:
+            return "uncertain"
+        return cause
+
+    def _lateral_cause(self, inputs, ratio: float, low_speed: bool, after_reset: bool, lateral_ok: bool,
+                       beta: float, vx: float, delta: float) -> str:
+        """Why sideslip (and the lateral forces) are not valid, or "valid"."""
+        if low_speed:
+            return "low_speed"
+        if after_reset:
+            return "after_reset"
+        present = lateral_ok and inputs.has(*WHEEL_SPEEDS)
+        saturated = any(inputs.saturated(n) for n in ("ay", "steering_wheel_angle", "yaw_rate"))
+        cause = validity.judge(present, saturated, ratio)
+        if cause != "valid":
+            self.kinematic.reset()
+            return cause
+        yaw_rate = inputs.values["yaw_rate"]
+        moving_as_measured = self.kinematic.inside(beta, inputs.values["ay"], yaw_rate, vx)
+        in_regime = self.regime is None or self.regime.inside(delta, vx, yaw_rate)
+        return "valid" if moving_as_measured and in_regime else "model_regime"
