@@ -43,6 +43,7 @@ from canest.estimation import validity
 from canest.estimation.estimate import OUTPUT_STATES, Estimate
 from canest.estimation.inputs import WHEEL_SPEEDS, TickInputs
 from canest.estimation.reference_speed import ReferenceSpeed
+from canest.estimation.steering_zero import steering_zero
 from canest.filters import Transition, make_filter
 from canest.filters.base import central_difference_jacobian
 from canest.models.wheel_force import WheelAcceleration
@@ -112,6 +113,7 @@ class Estimator:
         self.regime = None if getattr(model, "parameters", 0) else validity.LinearRegime(config.vehicle, self.dt)
         self.kinematic = validity.KinematicCheck(self.dt)
         self.gyros = [n for n in validity.OBSERVED_BY["yaw_rate"] if n in model.measurement_names]  # the measured ones
+        self.steering_zero = steering_zero(config)
 
     def reset(self) -> None:
         """Forget the state: the next tick with inputs initializes a new filter."""
@@ -149,7 +151,7 @@ class Estimator:
         return True
 
     def _road_wheel_angle(self, inputs: TickInputs) -> float:
-        return inputs.values.get("steering_wheel_angle", 0.0) / self.vehicle.steering_ratio
+        return self.steering_zero.angle(inputs) / self.vehicle.steering_ratio
 
     def _control(self, inputs: TickInputs, t: float) -> np.ndarray:
         """The model input ``u`` of this tick."""
@@ -304,6 +306,8 @@ class Estimator:
             return "low_speed"
         if mode == "degraded" and t < self.suspect_until:
             return "after_reset"
+        if not self.steering_zero.learned:
+            return "initializing"
         present = lateral_ok and inputs.has(*WHEEL_SPEEDS)
         saturated = any(inputs.saturated(n) for n in ("ay", "steering_wheel_angle", "yaw_rate"))
         cause = validity.judge(present, saturated, ratio)
