@@ -270,13 +270,22 @@ def _range(doc: Document, where: tuple, entry: dict, signals: list) -> tuple:
     if not isinstance(given, list) or len(given) != 2 or \
             any(isinstance(b, bool) or not isinstance(b, (int, float)) for b in given):
         raise doc.error(where, f"must be [low, high] in the DBC's physical unit, or none; got {given!r}")
-    for bound in given:
-        problem = limits.SIGNAL["range"].violation(float(bound))
+    bounds = [_finite(bound) for bound in given]
+    for bound, number in zip(given, bounds):
+        problem = limits.SIGNAL["range"].violation(number)
         if problem:
             raise doc.error(where, f"{problem}, got {bound}")
-    if not given[0] < given[1]:
+    if not bounds[0] < bounds[1]:
         raise doc.error(where, f"low must be below high, got {given!r}")
-    return (float(given[0]), float(given[1]))
+    return tuple(bounds)
+
+
+def _finite(number) -> float:
+    """A YAML number as a float; an integer too large for one becomes infinity (then refused as not finite)."""
+    try:
+        return float(number)
+    except OverflowError:
+        return math.inf if number > 0 else -math.inf
 
 
 def _valid_when(doc: Document, where: tuple, message, dbc_path: Path, given) -> ValidWhen:
@@ -300,7 +309,7 @@ def _valid_when(doc: Document, where: tuple, message, dbc_path: Path, given) -> 
     for value in values:
         if isinstance(value, str) and value in choices:
             physical.append(choices[value])
-        elif isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value):
+        elif isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(_finite(value)):
             physical.append(float(value))
         else:
             raise doc.error(where + ("values",), f"{value!r} is neither a number nor a value name of {name} "

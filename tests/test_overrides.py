@@ -90,8 +90,9 @@ def test_open_range_passes_what_a_raw_style_dbc_range_would_reject(tmp_path):
     assert decoded["yaw_rate"] == pytest.approx(-11.5 * DEG)
 
 
-@pytest.mark.parametrize("value, problem", [([5, 1], "low must be below high"), ("wide", "must be \\[low, high\\]"),
-                                            ([0, float("inf")], "must be a finite number"), ([1], "must be \\[low")])
+@pytest.mark.parametrize("value, problem", [
+    ([5, 1], "low must be below high"), ("wide", "must be \\[low, high\\]"), ([1], "must be \\[low"),
+    ([0, float("inf")], "must be a finite number"), ([0, 10 ** 400], "must be a finite number")])
 def test_bad_range_names_file_line_key(tmp_path, value, problem):
     path = range_variant(tmp_path, value)
     assert re.match(rf"{re.escape(str(path))}:\d+: input\.signals\.yaw_rate\.range: {problem}", error_of(path))
