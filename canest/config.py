@@ -27,7 +27,7 @@ from canest.errors import ConfigError
 from canest.estimation import catalog
 from canest.filters import FACTORIZATIONS, FILTERS, make_filter
 from canest.params import TireModelParams, VehicleParams
-from canest.settings import BusConfig, Config, EstimatorConfig, MessageChecks, SignalSpec
+from canest.settings import BusConfig, Config, EstimatorConfig, MessageChecks, SignalSpec, ValidWhen
 from canest.yamldoc import Document, suggestion
 
 BUILTIN_DIR = Path(__file__).resolve().parent / "data"
@@ -43,8 +43,12 @@ SECTION_KEYS = {
 BUS_KEYS = ("interface", "channel", "options")
 SET_BY_CANEST = ("interface", "channel", "can_filters")  # never a bus option: canest filters on the mapped IDs
 CHECKED_INTERFACES = ("socketcan", "virtual")  # python-can buses that silently ignore any keyword they do not name
-SIGNAL_KEYS = ("signal", "unit", "sign", "scale", "offset")
-CHECK_ROLES = tuple(f.name for f in dataclasses.fields(MessageChecks))
+SIGNAL_KEYS = ("signal", "unit", "sign", "scale", "offset", "range", "valid", "stuck_after", "zero")
+MESSAGE_KEYS = tuple(f.name for f in dataclasses.fields(MessageChecks))
+SIGNAL_ROLES = ("counter", "checksum")  # message keys that name a signal of the message
+VALID_KEYS = ("signal", "values")
+FD_CHOICES = {True: "fd", False: "classic", "any": "any"}  # input.messages.*.fd; absent: as the DBC declares
+MAX_PARTS = 8  # signals one composite input may add up
 NOISE_KEYS = {name: tuple(getattr(EstimatorConfig(), name)) for name in ("process_noise", "measurement_noise", "initial_std")}
 
 
@@ -222,6 +226,97 @@ def _mapped_signal(doc: Document, where: tuple, database, dbc_path: Path, given)
     return message, signal
 
 
+def _mapped_signals(doc: Document, where: tuple, database, dbc_path: Path, given) -> tuple:
+    """The message and the signals ``MESSAGE.SIGNAL`` (or a list of them, one message, added up) names."""
+    names = given if isinstance(given, list) else [given]
+    if not names or len(names) > MAX_PARTS:
+        raise doc.error(where, f"must be MESSAGE.SIGNAL or a list of 1 to {MAX_PARTS} of them (added up)")
+    mapped = [_mapped_signal(doc, where, database, dbc_path, name) for name in names]
+    message = mapped[0][0]
+    other = next((m for m, _ in mapped if m is not message), None)
+    if other is not None:
+        raise doc.error(where, f"the signals of a sum must come from one message, got '{message.name}' and "
+                               f"'{other.name}'")
+    units = {sig.normal_unit(s.unit or "") for _, s in mapped}
+    if len(units) > 1:
+        raise doc.error(where, f"the signals of a sum must share one unit, got {', '.join(repr(s.unit) for _, s in mapped)}")
+    return message, [s for _, s in mapped]
+
+
+def _unit_factor(doc: Document, where: tuple, entry: dict, canonical: str, signal, name: str, vehicle) -> float:
+    """The factor to SI of the unit the entry gives (else the DBC's); a given unit must mean the DBC's."""
+    unit = doc.text(where, entry, "unit", signal.unit)
+    if not unit:
+        raise doc.error(where, f"signal {name} has no unit in the DBC; give 'unit'")
+    try:
+        factor = sig.si_factor(canonical, unit, vehicle.wheel_radius)
+    except ValueError as exc:
+        raise doc.error(where + ("unit",), str(exc)) from None
+    dbc_unit = sig.normal_unit(signal.unit or "")
+    if "unit" in entry and dbc_unit is not None and dbc_unit != sig.normal_unit(unit):
+        raise doc.error(where + ("unit",), f"'{unit}' contradicts the DBC unit '{signal.unit}' of {name}")
+    return factor
+
+
+def _range(doc: Document, where: tuple, entry: dict, signals: list) -> tuple:
+    """(low, high) a value must lie in: the DBC's (summed over a composite's signals), ``[low, high]`` or ``none``."""
+    if "range" not in entry:
+        lows, highs = [s.minimum for s in signals], [s.maximum for s in signals]
+        return (None if None in lows else sum(lows), None if None in highs else sum(highs))
+    given = entry["range"]
+    if given is None or given == "none":
+        return (None, None)
+    where = where + ("range",)
+    if not isinstance(given, list) or len(given) != 2 or \
+            any(isinstance(b, bool) or not isinstance(b, (int, float)) for b in given):
+        raise doc.error(where, f"must be [low, high] in the DBC's physical unit, or none; got {given!r}")
+    bounds = [_finite(bound) for bound in given]
+    for bound, number in zip(given, bounds):
+        problem = limits.SIGNAL["range"].violation(number)
+        if problem:
+            raise doc.error(where, f"{problem}, got {bound}")
+    if not bounds[0] < bounds[1]:
+        raise doc.error(where, f"low must be below high, got {given!r}")
+    return tuple(bounds)
+
+
+def _finite(number) -> float:
+    """A YAML number as a float; an integer too large for one becomes infinity (then refused as not finite)."""
+    try:
+        return float(number)
+    except OverflowError:
+        return math.inf if number > 0 else -math.inf
+
+
+def _valid_when(doc: Document, where: tuple, message, dbc_path: Path, given) -> ValidWhen:
+    """``valid: SIGNAL`` (valid when not 0) or ``valid: {signal: SIGNAL, values: [...]}`` (numbers or VAL_ names)."""
+    if isinstance(given, dict):
+        doc.reject_unknown(where, given, VALID_KEYS)
+        name, values = doc.text(where, given, "signal"), given.get("values", [])
+        values = values if isinstance(values, list) else [values]
+        if not values:
+            raise doc.error(where + ("values",), "give at least one valid value")
+    elif isinstance(given, str):
+        name, values = given, []
+    else:
+        raise doc.error(where, f"must be a signal name or {{signal: NAME, values: [...]}}, got {given!r}")
+    signal = next((s for s in message.signals if s.name == name), None)
+    if signal is None:
+        names = [s.name for s in message.signals]
+        raise doc.error(where, f"no signal '{name}' in message '{message.name}' of {dbc_path}; {suggestion(name, names)}")
+    choices = {str(label): raw * signal.scale + signal.offset for raw, label in (signal.choices or {}).items()}
+    physical = []
+    for value in values:
+        if isinstance(value, str) and value in choices:
+            physical.append(choices[value])
+        elif isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(_finite(value)):
+            physical.append(float(value))
+        else:
+            raise doc.error(where + ("values",), f"{value!r} is neither a number nor a value name of {name} "
+                                                 f"({', '.join(choices) or 'it names none'})")
+    return ValidWhen(name, tuple(physical))
+
+
 def _signal_specs(doc: Document, database, dbc_path: Path, vehicle: VehicleParams) -> dict:
     key_path = ("input", "signals")
     section = doc.section(key_path)
@@ -235,24 +330,27 @@ def _signal_specs(doc: Document, database, dbc_path: Path, vehicle: VehicleParam
         if not isinstance(entry, dict) or "signal" not in entry:
             raise doc.error(where, "needs 'signal: MESSAGE.SIGNAL'")
         doc.reject_unknown(where, entry, SIGNAL_KEYS)
-        message, signal = _mapped_signal(doc, where + ("signal",), database, dbc_path, entry["signal"])
+        message, signals = _mapped_signals(doc, where + ("signal",), database, dbc_path, entry["signal"])
+        signal = signals[0]
         name = f"{message.name}.{signal.name}"
-        unit = doc.text(where, entry, "unit", signal.unit)
-        if not unit:
-            raise doc.error(where, f"signal {name} has no unit in the DBC; give 'unit'")
-        if signal.unit and entry.get("unit") and signal.unit.strip() != unit.strip():
-            raise doc.error(where + ("unit",), f"'{unit}' contradicts the DBC unit '{signal.unit}' of {name}")
-        try:
-            factor = sig.si_factor(canonical, unit, vehicle.wheel_radius)
-        except ValueError as exc:
-            raise doc.error(where + ("unit",), str(exc)) from None
+        factor = _unit_factor(doc, where, entry, canonical, signal, name, vehicle)
         sign = entry.get("sign", 1)
         if isinstance(sign, bool) or sign not in (1, -1):
             raise doc.error(where + ("sign",), f"must be 1 or -1, got {sign!r}")
         scale = doc.number(where, entry, "scale", limits.SIGNAL["scale"], 1.0)
         offset = doc.number(where, entry, "offset", limits.SIGNAL["offset"], 0.0)
+        stuck_after = doc.number(where, entry, "stuck_after", limits.SIGNAL["stuck_after"]) \
+            if "stuck_after" in entry else None
+        zero = entry.get("zero")
+        if zero is not None and (zero != "learn" or canonical != "steering_wheel_angle"):
+            raise doc.error(where + ("zero",), "only 'zero: learn' on steering_wheel_angle (a relative angle whose "
+                                               f"zero is learned while driving straight), got {zero!r}")
+        valid = _valid_when(doc, where + ("valid",), message, dbc_path, entry["valid"]) if "valid" in entry else None
         mux = int(signal.multiplexer_ids[0]) if signal.multiplexer_ids else None
-        specs[canonical] = SignalSpec(canonical, message.name, signal.name, sign * scale * factor, offset, mux)
+        specs[canonical] = SignalSpec(canonical, message.name, signal.name, sign * scale * factor, offset, mux,
+                                      parts=tuple(s.name for s in signals[1:]),
+                                      range=_range(doc, where, entry, signals), valid=valid,
+                                      stuck_after=stuck_after, learn_zero=zero == "learn")
     return specs
 
 
@@ -268,7 +366,7 @@ def _check_model_inputs(doc: Document, est: EstimatorConfig, specs: dict) -> Non
 
 
 def _message_checks(doc: Document, database, dbc_path: Path, specs: dict) -> dict:
-    """Integrity checks of mapped messages (a check on a message no signal is taken from would never run)."""
+    """Integrity checks and overrides of mapped messages (on a message no signal is taken from they would never run)."""
     key_path = ("input", "messages")
     section = doc.section(key_path, required=False)
     mapped = {spec.message for spec in specs.values()}
@@ -284,14 +382,24 @@ def _message_checks(doc: Document, database, dbc_path: Path, specs: dict) -> dic
             raise doc.error(where, "no signal of input.signals comes from this message, so its checks would never "
                                    "run; map one of its signals or remove the entry")
         entry = doc.section(where)
-        doc.reject_unknown(where, entry, CHECK_ROLES)
+        doc.reject_unknown(where, entry, MESSAGE_KEYS)
         names = [s.name for s in message.signals]
-        for role in entry:
+        roles = {}
+        for role in SIGNAL_ROLES:
             signal_name = doc.text(where, entry, role)
-            if signal_name not in names:
+            if signal_name is not None and signal_name not in names:
                 raise doc.error(where + (role,), f"no signal '{signal_name}' in message '{name}' of {dbc_path}; "
                                                  f"{suggestion(signal_name, names)}")
-        checks[name] = MessageChecks(**entry)
+            roles[role] = signal_name
+        fd = entry.get("fd")
+        if "fd" in entry and (not isinstance(fd, (bool, str)) or fd not in FD_CHOICES):
+            raise doc.error(where + ("fd",), f"must be true (CAN FD frames), false (classic frames) or any; got {fd!r} "
+                                             f"(the DBC says {'CAN FD' if message.is_fd else 'classic'})")
+        cycle_time = doc.number(where, entry, "cycle_time", limits.MESSAGE["cycle_time"]) \
+            if "cycle_time" in entry else None
+        valid = _valid_when(doc, where + ("valid",), message, dbc_path, entry["valid"]) if "valid" in entry else None
+        checks[name] = MessageChecks(**roles, valid=valid, fd=FD_CHOICES[fd] if "fd" in entry else "dbc",
+                                     cycle_time=cycle_time)
     return checks
 
 

@@ -82,4 +82,10 @@ NOISE = Range(1e-9, 1e6)  # process noise, measurement noise and initial standar
 SIGNAL = {  # input.signals.<name>: SI = sign * scale * unit factor * DBC value + offset
     "scale": Range(1e-9, 1e9),
     "offset": Range(-1e9, 1e9),
+    "stuck_after": Range(0.1, 3600.0, "s"),  # exact repetition this long while moving: a stuck sender
+    "range": Range(-1e12, 1e12),  # each bound of a range override, in the DBC's physical unit
+}
+
+MESSAGE = {  # input.messages.<name>
+    "cycle_time": Range(0.0005, 60.0, "s"),  # overrides the DBC's GenMsgCycleTime
 }

@@ -49,3 +49,9 @@ class VehicleParams:
     @property
     def wheelbase(self) -> float:
         return self.cg_to_front + self.cg_to_rear
+
+    @property
+    def understeer_gradient(self) -> float:
+        """K_us of the linear single-track model (s^2/m): steady road wheel angle = r (L + K_us vx^2) / vx."""
+        cf, cr = self.cornering_stiffness_front, self.cornering_stiffness_rear
+        return self.mass * (self.cg_to_rear * cr - self.cg_to_front * cf) / (self.wheelbase * cf * cr)

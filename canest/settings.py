@@ -25,8 +25,26 @@ class BusConfig:
 
 
 @dataclass(frozen=True)
+class ValidWhen:
+    """A signal of the same message saying whether a value (or the whole frame) may be used.
+
+    ``values``: the DBC physical values that mean valid; empty: any value but 0 (a validity bit)."""
+
+    signal: str
+    values: tuple = ()
+
+    def accepts(self, decoded: dict) -> bool:
+        value = decoded.get(self.signal, 1)
+        return value in self.values if self.values else bool(value)
+
+
+@dataclass(frozen=True)
 class SignalSpec:
-    """Where a canonical signal lives and how its DBC value becomes SI: si = factor * value + offset."""
+    """Where a canonical signal lives and how its DBC value becomes SI: si = factor * value + offset.
+
+    ``value`` is the DBC physical value of ``signal`` plus those of ``parts`` (a composite: coarse + fine
+    steering); it must lie in ``range`` (low, high; None: unbounded), the DBC's unless the config overrides it.
+    """
 
     canonical: str
     message: str
@@ -34,15 +52,30 @@ class SignalSpec:
     factor: float
     offset: float = 0.0
     multiplexer_value: int | None = None
+    parts: tuple = ()
+    range: tuple = (None, None)
+    valid: ValidWhen | None = None
+    stuck_after: float | None = None  # s: the same raw value this long while the car moves is a stuck sender
+    learn_zero: bool = False  # a relative angle: its zero is learned while driving straight
+
+    @property
+    def names(self) -> tuple:
+        """Every DBC signal that adds up to the value."""
+        return (self.signal, *self.parts)
 
 
 @dataclass(frozen=True)
 class MessageChecks:
-    """Optional integrity signals of an input message."""
+    """Optional integrity checks and overrides of an input message.
+
+    ``fd``: which frames are accepted, ``dbc`` (as its DBC declares), ``classic``, ``fd`` or ``any``;
+    ``cycle_time`` (s) overrides the DBC's ``GenMsgCycleTime`` for the timeouts."""
 
     counter: str | None = None
     checksum: str | None = None
-    valid: str | None = None
+    valid: ValidWhen | None = None
+    fd: str = "dbc"
+    cycle_time: float | None = None
 
 
 @dataclass(frozen=True)

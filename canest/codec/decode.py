@@ -15,20 +15,11 @@ import can
 
 from canest.codec import integrity
 from canest.codec.dbc import load_database
+from canest.codec.plausibility import SlewLimit
+from canest.codec.sample_checks import MOVING_WHEEL_SPEED, StuckDetector, at_limit, outside
 from canest.errors import ConfigError
 from canest.settings import Config, MessageChecks
-from canest.codec.plausibility import SlewLimit
-
-
-def at_limit(signal, raw: float) -> bool:
-    """A raw value within half a quantum of a non-zero limit of its DBC range: saturated, not measured.
-
-    A sensor beyond its range sends the limit (a wheel speed above what the
-    signal carries, an accelerometer at full scale); that is a bound, not the
-    value. Zero is a physical value (standstill), never a saturation."""
-    half = abs(signal.scale) / 2.0
-    return any(limit is not None and limit != 0 and abs(raw - limit) <= half
-               for limit in (signal.minimum, signal.maximum))
+from canest.signals import INPUT_GROUPS
 
 
 class _MessagePlan:
@@ -47,6 +38,15 @@ class _MessagePlan:
                 raise ConfigError(f"{config_path}: input.messages.{message.name}.checksum: {exc}") from None
         self.last_counter = None
         self.counter_modulus = 2 ** self.signal_by_name[self.checks.counter].length if self.checks.counter else 0
+        self.is_fd = {"dbc": message.is_fd, "fd": True, "classic": False}.get(self.checks.fd)  # None: any
+
+    def cycle_time(self) -> tuple:
+        """(seconds between frames, where that comes from: ``config``, ``DBC`` or ``default``)."""
+        if self.checks.cycle_time is not None:
+            return self.checks.cycle_time, "config"
+        if self.message.cycle_time:
+            return self.message.cycle_time / 1000.0, "DBC"
+        return DEFAULT_CYCLE_TIME, "default"
 
 
 DEFAULT_CYCLE_TIME = 0.1  # s, for messages whose DBC gives no GenMsgCycleTime
@@ -78,13 +78,20 @@ class InputDecoder:
             self.plans[message.frame_id] = _MessagePlan(message, specs, config.messages.get(name), config.path)
         self.frame_of = {spec.canonical: fid for fid, plan in self.plans.items() for spec in plan.specs}
         self.plausible = SlewLimit(config.signals)
+        self.stuck = StuckDetector({s.canonical: s.stuck_after for s in config.signals.values() if s.stuck_after})
+        self.wheel_speeds = {}  # canonical -> latest decoded value: whether the car moves
         self.counts = Counter()
-        self.last_saturated = set()  # canonical inputs of the last decoded frame that sat at a DBC limit
+        self.last_saturated = set()  # canonical inputs of the last decoded frame that sat at a limit of its range
+
+    @property
+    def moving(self) -> bool:
+        speeds = self.wheel_speeds.values()
+        return bool(speeds) and sum(abs(w) for w in speeds) / len(speeds) > MOVING_WHEEL_SPEED
 
     def cycle_time(self, canonical: str) -> float:
-        """Seconds between frames of the message carrying ``canonical`` (the DBC's, else ``DEFAULT_CYCLE_TIME``)."""
-        message = self.plans[self.frame_of[canonical]].message
-        return (message.cycle_time or DEFAULT_CYCLE_TIME * 1000) / 1000.0
+        """Seconds between frames of the message carrying ``canonical`` (the config's, the DBC's, else
+        ``DEFAULT_CYCLE_TIME``)."""
+        return self.plans[self.frame_of[canonical]].cycle_time()[0]
 
     def timeouts(self, timeout_cycles: float) -> dict:
         """Per canonical input: ``timeout_cycles`` times its message's cycle time (at least ``MIN_TIMEOUT``)."""
@@ -114,7 +121,7 @@ class InputDecoder:
             return None
         if msg.is_remote_frame:
             return self._reject("remote_frame")
-        if msg.is_fd != plan.message.is_fd:
+        if plan.is_fd is not None and msg.is_fd != plan.is_fd:
             return self._reject("fd_mismatch")
         if len(msg.data) != plan.message.length:
             return self._reject("dlc")
@@ -125,7 +132,7 @@ class InputDecoder:
         except Exception:  # cantools raises DecodeError and others for malformed payloads
             return self._reject("decode")
         checks = plan.checks
-        if checks.valid and not values.get(checks.valid, 1):
+        if checks.valid and not checks.valid.accepts(values):
             return self._reject("invalid_flag")
         if checks.counter:
             counter = int(values[checks.counter])
@@ -140,23 +147,33 @@ class InputDecoder:
                     self.counts["counter_jumps"] += 1
         out = []
         self.last_saturated = set()
+        dropped = Counter()
         for spec in plan.specs:
-            if spec.signal not in values:
+            if any(name not in values for name in spec.names):
                 continue  # another multiplexer page of this message
-            raw = float(values[spec.signal])
-            signal = plan.signal_by_name[spec.signal]
+            raw = sum(float(values[name]) for name in spec.names)
             if not math.isfinite(raw):
                 return self._reject("non_finite")
-            if (signal.minimum is not None and raw < signal.minimum - 1e-9) or \
-                    (signal.maximum is not None and raw > signal.maximum + 1e-9):
+            if outside(spec.range, raw):
                 return self._reject("out_of_range")
-            if at_limit(signal, raw):
+            if spec.valid and not spec.valid.accepts(values):
+                dropped["invalid_signal"] += 1
+                continue
+            if self.stuck.stuck(spec.canonical, raw, msg.timestamp, self.moving):
+                dropped["stuck"] += 1
+                continue
+            if at_limit(spec.range, plan.signal_by_name[spec.signal].scale, raw):
                 self.last_saturated.add(spec.canonical)
                 self.counts["saturated_samples"] += 1
             out.append((spec.canonical, spec.factor * raw + spec.offset))
+        for cause, count in dropped.items():
+            self.counts[f"{cause}_samples"] += count
+        if dropped and not out:
+            return self._reject(next(iter(dropped)))
         plausible = self.plausible.accept(out, msg.timestamp)
         if out and not plausible:
             return self._reject("implausible")
         self.counts["implausible_samples"] += len(out) - len(plausible)
         self.counts["decoded"] += 1
+        self.wheel_speeds.update((name, value) for name, value in plausible if name in INPUT_GROUPS["wheel_speeds"])
         return plausible

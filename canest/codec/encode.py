@@ -150,10 +150,12 @@ class InputEncoder:
         if checks.counter:
             values[checks.counter] = self.counters[frame_id]
             self.counters[frame_id] = (self.counters[frame_id] + 1) % plan.counter_modulus
-        if checks.valid:
-            values[checks.valid] = 1
+        for valid in [checks.valid, *(spec.valid for spec in plan.specs)]:
+            if valid:
+                values[valid.signal] = valid.values[0] if valid.values else 1
         data = bytearray(message.encode(values, strict=False))
         if plan.crc_index is not None:
             data = integrity.seal(frame_id, data, plan.crc_index)
         return can.Message(timestamp=timestamp, arbitration_id=frame_id, is_extended_id=message.is_extended_frame,
-                           data=bytes(data), is_fd=message.is_fd, channel=channel)
+                           data=bytes(data), is_fd=message.is_fd if plan.is_fd is None else plan.is_fd,
+                           channel=channel)

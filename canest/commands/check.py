@@ -23,6 +23,20 @@ def _bus(bus) -> str:
     return f"{bus.interface}:{bus.channel}" + (f" ({options})" if options else "")
 
 
+def _overrides(spec) -> str:
+    """What the signal map adds to the DBC: range, validity, stuck detection, learned zero."""
+    notes = []
+    if spec.range != (None, None):
+        notes.append(f"range [{spec.range[0]}, {spec.range[1]}]")
+    if spec.valid:
+        notes.append(f"valid when {spec.valid.signal}" + (f" in {list(spec.valid.values)}" if spec.valid.values else " != 0"))
+    if spec.stuck_after:
+        notes.append(f"stuck after {spec.stuck_after:g} s")
+    if spec.learn_zero:
+        notes.append("zero learned")
+    return f"  ({'; '.join(notes)})" if notes else ""
+
+
 def run(args) -> int:
     config = config_from_args(args)
     decoder = InputDecoder(config)
@@ -37,14 +51,17 @@ def run(args) -> int:
     e = config.estimator
     print(f"filter   {e.filter} ({e.factorization}) at {e.rate_hz:g} Hz, low-speed below {e.min_speed:g} m/s")
     print()
-    print(f"{'canonical':<22} {'message.signal':<40} {'id':>6} {'cycle':>6} {'timeout':>8}  SI = factor * DBC value + offset")
+    print(f"{'canonical':<22} {'message.signal':<40} {'id':>6} {'cycle (from)':>14} {'timeout':>8}  "
+          "SI = factor * DBC value + offset")
     for plan in decoder.plans.values():
+        seconds, source = plan.cycle_time()
         for spec in plan.specs:
-            cycle = f"{plan.message.cycle_time}ms" if plan.message.cycle_time else "-"
-            print(f"{spec.canonical:<22} {spec.message + '.' + spec.signal:<40} {plan.message.frame_id:>#6x} "
-                  f"{cycle:>6} {timeouts[spec.canonical]:>7.3f}s  {si_unit(spec.canonical)} = "
-                  f"{spec.factor:.6g} * value + {spec.offset:g}")
-    checked = [f"{name} ({', '.join(k for k, v in vars(c).items() if v)})" for name, c in config.messages.items()]
+            print(f"{spec.canonical:<22} {' + '.join(f'{spec.message}.{n}' for n in spec.names):<40} "
+                  f"{plan.message.frame_id:>#6x} {f'{seconds * 1000:g}ms ({source})':>14} "
+                  f"{timeouts[spec.canonical]:>7.3f}s  {si_unit(spec.canonical)} = "
+                  f"{spec.factor:.6g} * value + {spec.offset:g}{_overrides(spec)}")
+    checked = [f"{name} ({', '.join(f'{k}={v}' if k in ('fd', 'cycle_time') else k for k, v in vars(c).items() if v and v != 'dbc')})"
+               for name, c in config.messages.items()]
     if checked:
         print("\nintegrity checks: " + "; ".join(checked))
     print("\nOK")

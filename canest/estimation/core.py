@@ -46,6 +46,7 @@ from canest.estimation.estimate import OUTPUT_STATES, Estimate
 from canest.estimation.inputs import WHEEL_SPEEDS, TickInputs
 from canest.estimation.judge import DIVERGENCE_NIS, StateJudge
 from canest.estimation.reference_speed import ReferenceSpeed
+from canest.estimation.steering_zero import steering_zero
 from canest.filters import Transition, make_filter
 from canest.filters.base import central_difference_jacobian
 from canest.models.wheel_force import WheelAcceleration
@@ -107,6 +108,7 @@ class Estimator:
         self.reference_speed = ReferenceSpeed(self.vehicle.wheel_radius, self.vehicle.tire.longitudinal_stiffness,
                                               self.est.measurement_noise["vx_reference"])
         self.reference_wheel_acceleration = WheelAcceleration()
+        self.steering_zero = steering_zero(config)
 
     def reset(self) -> None:
         """Forget the state: the next tick with inputs initializes a new filter."""
@@ -141,7 +143,7 @@ class Estimator:
         return True
 
     def _road_wheel_angle(self, inputs: TickInputs) -> float:
-        return inputs.values.get("steering_wheel_angle", 0.0) / self.vehicle.steering_ratio
+        return self.steering_zero.angle(inputs) / self.vehicle.steering_ratio
 
     def _control(self, inputs: TickInputs, t: float) -> np.ndarray:
         """The model input ``u`` of this tick."""
@@ -260,7 +262,8 @@ class Estimator:
             "beta_std": std[self.beta], "yaw_rate_std": std[self.yaw],
         }
         lateral = {"low_speed": mode == "low_speed", "after_reset": mode == "degraded" and t < self.suspect_until,
-                   "lateral_ok": lateral_ok, "beta": beta, "vx": vx, "delta": self._road_wheel_angle(inputs)}
+                   "zero_learned": self.steering_zero.learned, "lateral_ok": lateral_ok, "beta": beta, "vx": vx,
+                   "delta": self._road_wheel_angle(inputs)}
         causes = self.judge.causes(inputs, ratios, std[self.vx], lateral, t)
         valid = {name: causes[name] == "valid" for name in causes}
         valid["vy"] = valid["beta"] and valid["vx"]

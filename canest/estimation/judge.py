@@ -81,13 +81,16 @@ class StateJudge:
             return "uncertain"
         return cause
 
-    def _lateral_cause(self, inputs, ratio: float, low_speed: bool, after_reset: bool, lateral_ok: bool,
-                       beta: float, vx: float, delta: float) -> str:
-        """Why sideslip (and the lateral forces) are not valid, or "valid"."""
+    def _lateral_cause(self, inputs, ratio: float, low_speed: bool, after_reset: bool, zero_learned: bool,
+                       lateral_ok: bool, beta: float, vx: float, delta: float) -> str:
+        """Why sideslip (and the lateral forces) are not valid, or "valid" (a steering zero still being learned:
+        "initializing")."""
         if low_speed:
             return "low_speed"
         if after_reset:
             return "after_reset"
+        if not zero_learned:
+            return "initializing"
         present = lateral_ok and inputs.has(*WHEEL_SPEEDS)
         saturated = any(inputs.saturated(n) for n in ("ay", "steering_wheel_angle", "yaw_rate"))
         cause = validity.judge(present, saturated, ratio)
