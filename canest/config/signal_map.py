@@ -1,185 +1,23 @@
-"""YAML configuration -> typed, validated dataclasses.
-
-Every error is a :class:`ConfigError` whose text names the file, the line and
-the key (``configs/ev.yaml:42: input.signals.ax.signal: ...``) so a user can
-fix it without reading code. Nothing is accepted silently: an unknown key is
-an error naming the nearest valid one, every number must lie in its physical
-range (:mod:`canest.limits`), a DBC path must exist (canest's own DBCs are
-named ``builtin:NAME``), and each mapped signal must decode from a frame ID
-no other message of its DBC shares. Paths inside a config are relative to the
-config.
-"""
+"""``input.signals`` and ``input.messages``: the signal map through the input DBC, overrides and integrity checks."""
 from __future__ import annotations
 
 import dataclasses
-import importlib
-import inspect
 import math
 from pathlib import Path
 
-import numpy as np
-from can.interfaces import BACKENDS, VALID_INTERFACES
-
 from canest import limits
 from canest import signals as sig
-from canest.codec.dbc import clamp_to_signal, load_database
-from canest.errors import ConfigError
-from canest.estimation import catalog
-from canest.filters import FACTORIZATIONS, FILTERS, make_filter
-from canest.params import TireModelParams, VehicleParams
-from canest.settings import BusConfig, Config, EstimatorConfig, MessageChecks, SignalSpec, ValidWhen
+from canest.codec.dbc import clamp_to_signal
+from canest.params import VehicleParams
+from canest.settings import MessageChecks, SignalSpec, ValidWhen
 from canest.yamldoc import Document, suggestion
 
-BUILTIN_DIR = Path(__file__).resolve().parent / "data"
-BUILTIN_PREFIX = "builtin:"
-DEFAULT_CONFIG = BUILTIN_DIR / "dici_ev.yaml"
-__all__ = ["BUILTIN_DIR", "BUILTIN_PREFIX", "DEFAULT_CONFIG", "ConfigError", "load_config"]
-
-SECTION_KEYS = {
-    (): ("vehicle", "input", "output", "estimator"),
-    ("input",): ("dbc", "bus", "signals", "messages"),
-    ("output",): ("dbc", "bus"),
-}
-BUS_KEYS = ("interface", "channel", "options")
-SET_BY_CANEST = ("interface", "channel", "can_filters")  # never a bus option: canest filters on the mapped IDs
-CHECKED_INTERFACES = ("socketcan", "virtual")  # python-can buses that silently ignore any keyword they do not name
 SIGNAL_KEYS = ("signal", "unit", "sign", "scale", "offset", "range", "valid", "stuck_after", "zero")
 MESSAGE_KEYS = tuple(f.name for f in dataclasses.fields(MessageChecks))
 SIGNAL_ROLES = ("counter", "checksum")  # message keys that name a signal of the message
 VALID_KEYS = ("signal", "values")
 FD_CHOICES = {True: "fd", False: "classic", "any": "any"}  # input.messages.*.fd; absent: as the DBC declares
 MAX_PARTS = 8  # signals one composite input may add up
-NOISE_KEYS = {name: tuple(getattr(EstimatorConfig(), name)) for name in ("process_noise", "measurement_noise", "initial_std")}
-
-
-def _tire(doc: Document) -> TireModelParams:
-    key_path = ("vehicle", "tire")
-    section = doc.section(key_path, required=False)
-    doc.reject_unknown(key_path, section, limits.TIRE)
-    defaults = TireModelParams()
-    return TireModelParams(**{name: doc.number(key_path, section, name, allowed, getattr(defaults, name))
-                              for name, allowed in limits.TIRE.items()})
-
-
-def _vehicle(doc: Document) -> VehicleParams:
-    section = doc.section(("vehicle",))
-    doc.reject_unknown(("vehicle",), section, [*limits.VEHICLE, "name", "tire"])
-    values = {name: doc.number(("vehicle",), section, name, allowed) for name, allowed in limits.VEHICLE.items()}
-    return VehicleParams(name=doc.text(("vehicle",), section, "name", doc.path.stem), tire=_tire(doc), **values)
-
-
-def _bus_keywords(interface: str) -> dict | None:
-    """The keywords (with defaults) python-can's bus class of ``interface`` names, if it ignores all others.
-
-    None for the other interfaces: their drivers take keywords of their own
-    (python-can's interface documentation lists them), passed on unchecked.
-    """
-    if interface not in CHECKED_INTERFACES:
-        return None
-    module, name = BACKENDS[interface]
-    parameters = inspect.signature(getattr(importlib.import_module(module), name).__init__).parameters.values()
-    return {p.name: p.default for p in parameters if p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY)
-            and p.name not in ("self", *SET_BY_CANEST)}
-
-
-def _bus_options(doc: Document, key_path: tuple, interface: str) -> dict:
-    options = doc.section(key_path, required=False)
-    keywords = _bus_keywords(interface)
-    for key, value in options.items():
-        if key in SET_BY_CANEST:
-            raise doc.error(key_path + (key,), "set by canest, not an option (interface and channel go one level up)")
-        if keywords is not None and key not in keywords:
-            raise doc.error(key_path + (key,), f"not an option of python-can's {interface} bus; "
-                                               f"{suggestion(key, keywords)}")
-        if keywords is not None and isinstance(keywords[key], bool) and not isinstance(value, bool):
-            raise doc.error(key_path + (key,), f"must be true or false, got {value!r}")
-    return dict(options)
-
-
-def _bus(doc: Document, key_path: tuple, default_channel: str) -> BusConfig:
-    section = doc.section(key_path, required=False)
-    doc.reject_unknown(key_path, section, BUS_KEYS, " (python-can keywords go under 'options:')")
-    interface = doc.text(key_path, section, "interface", "socketcan")
-    if interface not in VALID_INTERFACES:
-        raise doc.error(key_path + ("interface",), f"no python-can interface '{interface}'; "
-                                                   f"{suggestion(interface, VALID_INTERFACES)}")
-    channel = section.get("channel", default_channel)
-    if isinstance(channel, bool) or not isinstance(channel, (str, int)):
-        raise doc.error(key_path + ("channel",), f"must be a channel name or number, got {channel!r}")
-    return BusConfig(interface, str(channel), _bus_options(doc, key_path + ("options",), interface))
-
-
-def _dbc_path(doc: Document, key_path: tuple) -> Path:
-    """The DBC file ``key_path`` names: a path relative to the config, or ``builtin:NAME`` for canest's own."""
-    given = doc.text(key_path[:-1], doc.section(key_path[:-1]), key_path[-1])
-    if given is None:
-        raise doc.error(key_path, "missing DBC path")
-    if "\0" in given:
-        raise doc.error(key_path, f"a path cannot hold a NUL character, got {given!r}")
-    builtin = sorted(p.name for p in BUILTIN_DIR.glob("*.dbc"))
-    if given.startswith(BUILTIN_PREFIX):
-        name = given[len(BUILTIN_PREFIX):]
-        if name not in builtin:
-            raise doc.error(key_path, f"no built-in DBC '{name}'; built in: "
-                                      f"{', '.join(BUILTIN_PREFIX + b for b in builtin)}")
-        return (BUILTIN_DIR / name).resolve()
-    path = (doc.path.resolve().parent / given).resolve()
-    if path.is_file():
-        return path
-    hint = f" (canest's own is '{BUILTIN_PREFIX}{path.name}')" if path.name in builtin else ""
-    raise doc.error(key_path, f"DBC file not found: {path}{hint}")
-
-
-def _estimator(doc: Document) -> EstimatorConfig:
-    key_path = ("estimator",)
-    section = doc.section(key_path, required=False)
-    defaults = EstimatorConfig()
-    doc.reject_unknown(key_path, section, [f.name for f in dataclasses.fields(EstimatorConfig)])
-    values = {name: doc.number(key_path, section, name, allowed, getattr(defaults, name))
-              for name, allowed in limits.ESTIMATOR.items()}
-    for name, keys in NOISE_KEYS.items():
-        given = doc.section(key_path + (name,), required=False)
-        doc.reject_unknown(key_path + (name,), given, keys)
-        values[name] = {**getattr(defaults, name), **{k: doc.number(key_path + (name,), given, k, limits.NOISE)
-                                                       for k in given}}
-    compensation = section.get("latency_compensation", defaults.latency_compensation)
-    if not isinstance(compensation, bool):
-        raise doc.error(key_path + ("latency_compensation",), f"must be true or false, got {compensation!r}")
-
-    name = doc.text(key_path, section, "filter", defaults.filter)
-    if name not in FILTERS:
-        raise doc.error(key_path + ("filter",), f"unknown filter '{name}'; {suggestion(name, FILTERS)}")
-    model = doc.text(key_path, section, "model", catalog.model_for(name))
-    if model not in catalog.CATALOG:
-        raise doc.error(key_path + ("model",), f"unknown model '{model}'; {suggestion(model, catalog.CATALOG)}")
-    if "filter" not in section and "model" in section:
-        name = catalog.CATALOG[model].default_filter
-    problem = catalog.misfit(name, model)
-    if problem:
-        raise doc.error(key_path + ("model",), problem)
-    if compensation and not hasattr(catalog.CATALOG[model].model, "derivatives"):
-        raise doc.error(key_path + ("latency_compensation",), f"model '{model}' has no derivatives to back-date by")
-    factorization = doc.text(key_path, section, "factorization", defaults.factorization)
-    if factorization is not None and factorization not in FACTORIZATIONS:
-        raise doc.error(key_path + ("factorization",), f"must be one of {', '.join(FACTORIZATIONS)}")
-    options = doc.section(key_path + ("filter_options",), required=False)
-    for key, value in options.items():
-        if isinstance(value, float) and not math.isfinite(value):
-            raise doc.error(key_path + ("filter_options", key), f"must be a finite number, got {value}")
-    config = EstimatorConfig(filter=name, model=model, factorization=factorization, filter_options=options,
-                             latency_compensation=compensation, **values)
-    _check_filter_options(doc, config)
-    return config
-
-
-def _check_filter_options(doc: Document, est: EstimatorConfig) -> None:
-    """Build the filter once on a dummy state of the model's size so a wrong option fails at load time, naming the key."""
-    model = catalog.CATALOG[est.model].model
-    n = len(model.state_names)
-    try:
-        make_filter(est.filter, np.zeros(n), np.eye(n), model, est.factorization, est.filter_options)
-    except (TypeError, ValueError, ArithmeticError) as exc:
-        raise doc.error(("estimator", "filter_options"), f"{est.filter}: {exc}") from None
 
 
 def _never_decodes(message, signal) -> str | None:
@@ -317,7 +155,7 @@ def _valid_when(doc: Document, where: tuple, message, dbc_path: Path, given) -> 
     return ValidWhen(name, tuple(physical))
 
 
-def _signal_specs(doc: Document, database, dbc_path: Path, vehicle: VehicleParams) -> dict:
+def read_signal_specs(doc: Document, database, dbc_path: Path, vehicle: VehicleParams) -> dict:
     key_path = ("input", "signals")
     section = doc.section(key_path)
     specs = {}
@@ -354,18 +192,7 @@ def _signal_specs(doc: Document, database, dbc_path: Path, vehicle: VehicleParam
     return specs
 
 
-def _check_model_inputs(doc: Document, est: EstimatorConfig, specs: dict) -> None:
-    """Every input the model needs, and those the filter adds (the DICI-GFCKF's second IMU)."""
-    entry = catalog.CATALOG[est.model]
-    for reason, needed in (("the estimator", catalog.BASE_INPUTS),
-                           (f"model '{est.model}'", entry.required_inputs),
-                           (f"filter '{est.filter}'", entry.inputs_for(est.filter))):
-        missing = [name for name in needed if name not in specs]
-        if missing:
-            raise doc.error(("input", "signals"), f"{reason} needs {', '.join(missing)}")
-
-
-def _message_checks(doc: Document, database, dbc_path: Path, specs: dict) -> dict:
+def read_message_checks(doc: Document, database, dbc_path: Path, specs: dict) -> dict:
     """Integrity checks and overrides of mapped messages (on a message no signal is taken from they would never run)."""
     key_path = ("input", "messages")
     section = doc.section(key_path, required=False)
@@ -401,30 +228,3 @@ def _message_checks(doc: Document, database, dbc_path: Path, specs: dict) -> dic
         checks[name] = MessageChecks(**roles, valid=valid, fd=FD_CHOICES[fd] if "fd" in entry else "dbc",
                                      cycle_time=cycle_time)
     return checks
-
-
-def load_config(path) -> Config:
-    """Read and validate a config file; raise ConfigError naming file, line and key."""
-    path = Path(path)
-    doc = Document(path)
-    for key_path, known in SECTION_KEYS.items():
-        doc.reject_unknown(key_path, doc.section(key_path), known)
-    vehicle = _vehicle(doc)
-    input_dbc = _dbc_path(doc, ("input", "dbc"))
-    output_dbc = _dbc_path(doc, ("output", "dbc"))
-    input_db = load_database(input_dbc, f"{path}: input.dbc")
-    load_database(output_dbc, f"{path}: output.dbc")
-    specs = _signal_specs(doc, input_db, input_dbc, vehicle)
-    estimator = _estimator(doc)
-    _check_model_inputs(doc, estimator, specs)
-    return Config(
-        path=path.resolve(),
-        vehicle=vehicle,
-        input_dbc=input_dbc,
-        output_dbc=output_dbc,
-        input_bus=_bus(doc, ("input", "bus"), "vcan0"),
-        output_bus=_bus(doc, ("output", "bus"), "vcan1"),
-        signals=specs,
-        messages=_message_checks(doc, input_db, input_dbc, specs),
-        estimator=estimator,
-    )

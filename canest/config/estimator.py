@@ -1,0 +1,78 @@
+"""The ``estimator`` section: filter and model (a pair the model catalog accepts), noise, options; the inputs they need."""
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+
+from canest import limits
+from canest.estimation import catalog
+from canest.filters import FACTORIZATIONS, FILTERS, make_filter
+from canest.settings import EstimatorConfig
+from canest.yamldoc import Document, suggestion
+
+NOISE_KEYS = {name: tuple(getattr(EstimatorConfig(), name)) for name in ("process_noise", "measurement_noise", "initial_std")}
+
+
+def read_estimator(doc: Document) -> EstimatorConfig:
+    key_path = ("estimator",)
+    section = doc.section(key_path, required=False)
+    defaults = EstimatorConfig()
+    doc.reject_unknown(key_path, section, [f.name for f in dataclasses.fields(EstimatorConfig)])
+    values = {name: doc.number(key_path, section, name, allowed, getattr(defaults, name))
+              for name, allowed in limits.ESTIMATOR.items()}
+    for name, keys in NOISE_KEYS.items():
+        given = doc.section(key_path + (name,), required=False)
+        doc.reject_unknown(key_path + (name,), given, keys)
+        values[name] = {**getattr(defaults, name), **{k: doc.number(key_path + (name,), given, k, limits.NOISE)
+                                                       for k in given}}
+    compensation = section.get("latency_compensation", defaults.latency_compensation)
+    if not isinstance(compensation, bool):
+        raise doc.error(key_path + ("latency_compensation",), f"must be true or false, got {compensation!r}")
+
+    name = doc.text(key_path, section, "filter", defaults.filter)
+    if name not in FILTERS:
+        raise doc.error(key_path + ("filter",), f"unknown filter '{name}'; {suggestion(name, FILTERS)}")
+    model = doc.text(key_path, section, "model", catalog.model_for(name))
+    if model not in catalog.CATALOG:
+        raise doc.error(key_path + ("model",), f"unknown model '{model}'; {suggestion(model, catalog.CATALOG)}")
+    if "filter" not in section and "model" in section:
+        name = catalog.CATALOG[model].default_filter
+    problem = catalog.misfit(name, model)
+    if problem:
+        raise doc.error(key_path + ("model",), problem)
+    if compensation and not hasattr(catalog.CATALOG[model].model, "derivatives"):
+        raise doc.error(key_path + ("latency_compensation",), f"model '{model}' has no derivatives to back-date by")
+    factorization = doc.text(key_path, section, "factorization", defaults.factorization)
+    if factorization is not None and factorization not in FACTORIZATIONS:
+        raise doc.error(key_path + ("factorization",), f"must be one of {', '.join(FACTORIZATIONS)}")
+    options = doc.section(key_path + ("filter_options",), required=False)
+    for key, value in options.items():
+        if isinstance(value, float) and not math.isfinite(value):
+            raise doc.error(key_path + ("filter_options", key), f"must be a finite number, got {value}")
+    config = EstimatorConfig(filter=name, model=model, factorization=factorization, filter_options=options,
+                             latency_compensation=compensation, **values)
+    _check_filter_options(doc, config)
+    return config
+
+
+def _check_filter_options(doc: Document, est: EstimatorConfig) -> None:
+    """Build the filter once on a dummy state of the model's size so a wrong option fails at load time, naming the key."""
+    model = catalog.CATALOG[est.model].model
+    n = len(model.state_names)
+    try:
+        make_filter(est.filter, np.zeros(n), np.eye(n), model, est.factorization, est.filter_options)
+    except (TypeError, ValueError, ArithmeticError) as exc:
+        raise doc.error(("estimator", "filter_options"), f"{est.filter}: {exc}") from None
+
+
+def check_model_inputs(doc: Document, est: EstimatorConfig, specs: dict) -> None:
+    """Every input the model needs, and those the filter adds (the DICI-GFCKF's second IMU)."""
+    entry = catalog.CATALOG[est.model]
+    for reason, needed in (("the estimator", catalog.BASE_INPUTS),
+                           (f"model '{est.model}'", entry.required_inputs),
+                           (f"filter '{est.filter}'", entry.inputs_for(est.filter))):
+        missing = [name for name in needed if name not in specs]
+        if missing:
+            raise doc.error(("input", "signals"), f"{reason} needs {', '.join(missing)}")
