@@ -6,6 +6,7 @@ line, key, message or signal and, where there is one, the remedy). The
 command line prints such an error as one line and exits 2; any other
 exception is a bug and keeps its traceback.
 """
+import importlib
 
 
 class CanestError(Exception):
@@ -34,3 +35,20 @@ class TableError(CanestError):
 
 class UsageError(CanestError, ValueError):
     """Command-line arguments that do not fit together."""
+
+
+class MissingDependency(CanestError):
+    """An optional package a command needs is not installed; the text names the ``pip install`` remedy."""
+
+    @classmethod
+    def check(cls, module: str, feature: str, extra: str) -> None:
+        """Raise unless ``module`` imports: ``feature`` needs it and ``pip install canest[extra]`` provides it."""
+        try:
+            importlib.import_module(module)
+        except ImportError as exc:
+            raise cls(f"{feature} needs {module}, which cannot be imported ({exc}); "
+                      f"install it with: pip install 'canest[{extra}]'") from None
+
+
+class ClusterError(CanestError):
+    """A Dask scheduler that cannot be reached or refuses the connection."""

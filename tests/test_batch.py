@@ -54,7 +54,7 @@ def test_local_cluster_matches_sequential_replay_and_resumes(config, fleet, tmp_
         if row["status"] != "ok":
             continue
         log = Path(row["log"])
-        result = read_table(out / log.parent.name / log.stem / "ckf" / ESTIMATES)
+        result = read_table(out / log.parent.name / log.name / "ckf" / ESTIMATES)
         sequential = tmp_path / "sequential.csv"
         replay(config, log, out_csv=sequential, progress=False)
         expected = read_table(sequential)
@@ -63,7 +63,7 @@ def test_local_cluster_matches_sequential_replay_and_resumes(config, fleet, tmp_
         assert row["rmse_beta"] < 1.5 and 0.9 < row["valid_share"] <= 1.0
     assert (out / "fleet_summary.csv").read_text().count("\n") == LOGS + 2
 
-    victim = out / "north" / "drive01" / "ckf" / SUMMARY
+    victim = out / "north" / "drive01.log" / "ckf" / SUMMARY
     summary = json.loads(victim.read_text())
     summary["csv_bytes"] += 1  # as if the CSV had been cut short
     victim.write_text(json.dumps(summary))
