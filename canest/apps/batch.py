@@ -296,6 +296,14 @@ def sigint_ignored():
         signal.signal(signal.SIGINT, previous)
 
 
+def _reason(error: BaseException) -> str:
+    """An exception and its direct cause on one line (Dask's connect error names the address, its cause why)."""
+    parts = [str(error) or type(error).__name__]
+    if error.__cause__ is not None and str(error.__cause__):
+        parts.append(str(error.__cause__).split(">: ")[-1])  # without the repr of Dask's connector object
+    return ": ".join(parts).replace("\n", " ")
+
+
 @contextlib.contextmanager
 def connected(scheduler, workers, timeout: float):
     """A Dask client of the running scheduler at ``scheduler``, or of a new local cluster of ``workers`` processes.
@@ -308,11 +316,10 @@ def connected(scheduler, workers, timeout: float):
     if scheduler:
         try:
             client = Client(scheduler, timeout=timeout)
-        except (OSError, ValueError) as exc:
-            reason = str(exc.__cause__ or exc).split(">: ")[-1]
-            raise ClusterError(f"--scheduler {scheduler}: no Dask scheduler answered within {timeout:g} s ({reason}); "
-                               "check the address, start one with `dask scheduler`, or raise --connect-timeout") \
-                from None
+        except Exception as exc:  # refused, timed out, a malformed address, or something else answering
+            raise ClusterError(f"--scheduler {scheduler}: cannot connect to a Dask scheduler ({_reason(exc)}); "
+                               "check the address, start one with `dask scheduler`, or wait longer with "
+                               f"--connect-timeout (now {timeout:g} s)") from None
     else:
         with sigint_ignored():
             cluster = LocalCluster(n_workers=workers or os.cpu_count(), threads_per_worker=1, processes=True,
@@ -388,7 +395,6 @@ def run_batch(config: Config, patterns, out: Path, filters, scheduler=None, work
     stop = stop or Stop()
     out = Path(out)
     tasks = plan(find_logs(patterns, out), filters, input_root(patterns), out)
-    out.mkdir(parents=True, exist_ok=True)
     config_fingerprint = fingerprint(config)
     finished = {task: complete(task, config_fingerprint) for task in tasks}
     rows = [row for row in finished.values() if row is not None]
@@ -408,5 +414,6 @@ def run_batch(config: Config, patterns, out: Path, filters, scheduler=None, work
         # a task withdrawn or cancelled as it finished may have completed after all
         rows += ran + [complete(task, config_fingerprint) or stopped_row(task, why) for task, why in stopped]
     rows.sort(key=lambda r: (r["log"], r["filter"]))
+    out.mkdir(parents=True, exist_ok=True)
     write_fleet_summary(rows, out / FLEET_SUMMARY)
     return rows
