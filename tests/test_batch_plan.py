@@ -36,11 +36,18 @@ def test_input_root_is_where_the_patterns_start(tmp_path, monkeypatch, patterns,
     assert input_root(patterns) == Path(os.path.abspath(tmp_path / root))
 
 
-def test_results_folder_inside_the_input_is_not_read_as_logs(tmp_path):
+def test_results_inside_the_input_are_not_read_as_logs(tmp_path):
     log = touch(tmp_path / "data" / "drive.csv")
-    touch(tmp_path / "data" / "results" / "drive.csv" / "ckf" / "estimates.csv")
+    for name in ("estimates.csv", "summary.json", "estimates.csv.0123abcd.tmp"):
+        touch(tmp_path / "data" / "results" / "drive.csv" / "ckf" / name)
     touch(tmp_path / "data" / "results" / "fleet_summary.csv")
-    assert find_logs([str(tmp_path / "data" / "**" / "*.csv")], tmp_path / "data" / "results") == [log]
+    assert find_logs([str(tmp_path / "data" / "**" / "*")], tmp_path / "data" / "results") == [log]
+
+
+def test_results_in_the_logs_own_folder_are_refused(tmp_path):
+    log = touch(tmp_path / "drive.log")
+    with pytest.raises(UsageError, match=f"--out {tmp_path}: the results of {log} would go into {log}, which is a file"):
+        plan(find_logs([str(tmp_path / "*.log")], tmp_path), ["ckf"], input_root([str(tmp_path / "*.log")]), tmp_path)
 
 
 def test_no_log_is_a_usage_error(tmp_path):

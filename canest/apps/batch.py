@@ -98,18 +98,22 @@ def input_root(patterns) -> Path:
     return Path(os.path.commonpath(folders))
 
 
-def _inside(path: str, folder: str) -> bool:
-    return os.path.commonpath([path, folder]) == folder
+def _batch_output(path: str, results: str) -> bool:
+    """Whether a file is one the batch writes under its results folder (which may hold the logs too)."""
+    name = os.path.basename(path)
+    return (name in (ESTIMATES, SUMMARY, FLEET_SUMMARY) or name.endswith(".tmp")) and \
+        os.path.commonpath([path, results]) == results
 
 
 def find_logs(patterns, results: Path) -> list:
     """Every file matching the glob patterns (``**`` recurses), sorted, without duplicates.
 
-    Truth files and everything under ``results`` (the batch's own output) are left out.
+    Truth files and the files the batch writes under ``results`` are left out.
     """
     results = os.path.abspath(results)
     paths = sorted({Path(os.path.abspath(p)) for pattern in patterns for p in glob.glob(str(pattern), recursive=True)
-                    if os.path.isfile(p) and not p.endswith(TRUTH_SUFFIXES) and not _inside(os.path.abspath(p), results)})
+                    if os.path.isfile(p) and not p.endswith(TRUTH_SUFFIXES)
+                    and not _batch_output(os.path.abspath(p), results)})
     if not paths:
         raise UsageError(f"no log matches {' '.join(map(str, patterns))}")
     return paths
@@ -160,7 +164,12 @@ class Task:
 
 def plan(logs, filters, root: Path, out: Path) -> list:
     """One task per log and filter; results under OUT/<log relative to root, suffix kept>/<filter>."""
-    return [Task(log, name, out / log.relative_to(root) / name) for log in logs for name in filters]
+    tasks = [Task(log, name, out / log.relative_to(root) / name) for log in logs for name in filters]
+    clash = next((task for task in tasks if task.out.parent.is_file()), None)
+    if clash is not None:  # OUT is the logs' own folder: OUT/a.log/ckf would be inside the log a.log
+        raise UsageError(f"--out {out}: the results of {clash.log} would go into {clash.out.parent}, which is a "
+                         f"file; give the results a folder of their own, e.g. --out {out / 'results'}")
+    return tasks
 
 
 def complete(task: Task, config_fingerprint: str):
