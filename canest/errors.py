@@ -37,17 +37,16 @@ class UsageError(CanestError, ValueError):
     """Command-line arguments that do not fit together."""
 
 
-class MissingDependency(CanestError):
-    """An optional package a command needs is not installed; the text names the ``pip install`` remedy."""
+class DependencyError(CanestError):
+    """An optional package that the requested feature needs is not installed."""
 
     @classmethod
-    def check(cls, module: str, feature: str, extra: str) -> None:
-        """Raise unless ``module`` imports: ``feature`` needs it and ``pip install canest[extra]`` provides it."""
+    def require(cls, module: str, feature: str, install: str):
+        """Import ``module`` for ``feature``, or raise naming the command that installs it."""
         try:
-            importlib.import_module(module)
-        except ImportError as exc:
-            raise cls(f"{feature} needs {module}, which cannot be imported ({exc}); "
-                      f"install it with: pip install 'canest[{extra}]'") from None
+            return importlib.import_module(module)
+        except ImportError:
+            raise cls(f"{feature} needs the Python package '{module}', which is not installed: {install}") from None
 
 
 class ClusterError(CanestError):

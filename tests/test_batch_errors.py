@@ -39,7 +39,7 @@ def drive(config, tmp_path_factory):
 def test_batch_without_dask(drive, tmp_path):
     result = canest("batch", drive / "*.log", "--out", tmp_path / "out", missing=["dask", "distributed"])
     line = one_line_error(result)
-    assert "canest batch needs dask.distributed" in line and "pip install 'canest[fleet]'" in line
+    assert "canest batch needs the Python package 'dask.distributed'" in line and "pip install 'canest[fleet]'" in line
     assert not (tmp_path / "out").exists()
 
 
@@ -47,7 +47,7 @@ def test_batch_plot_without_matplotlib_fails_before_the_batch(drive, tmp_path):
     result = canest("batch", drive / "*.log", "--out", tmp_path / "out", "--plot", tmp_path / "err.png",
                     missing=["matplotlib"])
     line = one_line_error(result)
-    assert "--plot needs matplotlib" in line and "pip install 'canest[plot]'" in line
+    assert "--plot needs the Python package 'matplotlib'" in line and "pip install 'canest[plot]'" in line
     assert not (tmp_path / "out").exists()
 
 
@@ -55,7 +55,7 @@ def test_compare_plot_without_matplotlib_fails_before_the_replays(drive, tmp_pat
     result = canest("compare", drive / "a.log", drive / "a.truth.csv", "--filters", "ckf", "--plot",
                     tmp_path / "cmp.png", missing=["matplotlib"])
     line = one_line_error(result)
-    assert "--plot needs matplotlib" in line and "pip install 'canest[plot]'" in line
+    assert "--plot needs the Python package 'matplotlib'" in line and "pip install 'canest[plot]'" in line
     assert result.stdout == ""  # no filter ran
 
 

@@ -9,7 +9,7 @@ from pathlib import Path
 from canest.apps.batch import CONNECT_TIMEOUT_S, FLEET_SUMMARY, Stop, fleet_table, plot_errors, run_batch
 from canest.commands.common import FORMATTER, add_config, config_from_args
 from canest.apps.compare import parse_filters
-from canest.errors import MissingDependency
+from canest.errors import DependencyError
 
 EPILOG = """examples:
   canest batch 'logs/**/*.log' --config configs/dici_ev.yaml --out results/
@@ -25,9 +25,9 @@ Rerunning skips the tasks whose results are complete and whose config, DBCs,
 log and truth file are unchanged; a corrupt log fails only its own task.
 SIGINT or SIGTERM: no new tasks, the running ones finish (a second signal
 cancels them), the fleet summary lists the rest as stopped; rerun to resume.
-Exit status: 0 all tasks done (also after such a stop), 1 some task failed,
-2 an error before any task ran (one line: config, DBC, missing dask,
-unreachable scheduler, ...).
+Exit status: 0 all tasks done (also after such a stop), 1 some task failed;
+an error before any task ran (config, DBC, missing dask, unreachable
+scheduler, ...) is one line with the status of its kind (canest --help).
 On a multi-node cluster the logs, the config, its DBCs and OUT must be on a
 file system every worker sees (start workers with: dask worker tcp://HOST:8786)."""
 
@@ -65,9 +65,9 @@ def stop_on_signals(stop: Stop):
 
 
 def run(args) -> int:
-    MissingDependency.check("dask.distributed", "canest batch", "fleet")
+    DependencyError.require("dask.distributed", "canest batch", "pip install 'canest[fleet]'")
     if args.plot:  # before the batch, not after it
-        MissingDependency.check("matplotlib", "--plot", "plot")
+        DependencyError.require("matplotlib", "--plot", "pip install 'canest[plot]'")
     config = config_from_args(args)
     filters = parse_filters(args.filters) if args.filters else [config.estimator.filter]
     started = time.perf_counter()
