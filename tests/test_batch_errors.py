@@ -10,6 +10,7 @@ import time
 
 import pytest
 
+from canest.errors import ClusterError, DependencyError
 from canest.sim.simulate import simulate
 from tests.conftest import write_log_and_truth
 
@@ -21,8 +22,9 @@ def canest(*args, missing=()):
     return subprocess.run(command, capture_output=True, text=True, timeout=120)
 
 
-def one_line_error(result) -> str:
-    assert result.returncode == 2, result.stdout + result.stderr
+def one_line_error(result, kind) -> str:
+    """The one line of a ``kind`` of error, checked to be alone and to end the process with its status."""
+    assert result.returncode == getattr(kind, "exit_status", 2), result.stdout + result.stderr
     lines = result.stderr.splitlines()
     assert len(lines) == 1 and lines[0].startswith("canest: error: "), result.stderr
     return lines[0]
@@ -38,7 +40,7 @@ def drive(config, tmp_path_factory):
 
 def test_batch_without_dask(drive, tmp_path):
     result = canest("batch", drive / "*.log", "--out", tmp_path / "out", missing=["dask", "distributed"])
-    line = one_line_error(result)
+    line = one_line_error(result, DependencyError)
     assert "canest batch needs the Python package 'dask.distributed'" in line and "pip install 'canest[fleet]'" in line
     assert not (tmp_path / "out").exists()
 
@@ -46,7 +48,7 @@ def test_batch_without_dask(drive, tmp_path):
 def test_batch_plot_without_matplotlib_fails_before_the_batch(drive, tmp_path):
     result = canest("batch", drive / "*.log", "--out", tmp_path / "out", "--plot", tmp_path / "err.png",
                     missing=["matplotlib"])
-    line = one_line_error(result)
+    line = one_line_error(result, DependencyError)
     assert "--plot needs the Python package 'matplotlib'" in line and "pip install 'canest[plot]'" in line
     assert not (tmp_path / "out").exists()
 
@@ -54,7 +56,7 @@ def test_batch_plot_without_matplotlib_fails_before_the_batch(drive, tmp_path):
 def test_compare_plot_without_matplotlib_fails_before_the_replays(drive, tmp_path):
     result = canest("compare", drive / "a.log", drive / "a.truth.csv", "--filters", "ckf", "--plot",
                     tmp_path / "cmp.png", missing=["matplotlib"])
-    line = one_line_error(result)
+    line = one_line_error(result, DependencyError)
     assert "--plot needs the Python package 'matplotlib'" in line and "pip install 'canest[plot]'" in line
     assert result.stdout == ""  # no filter ran
 
@@ -73,7 +75,7 @@ def test_unreachable_scheduler_fails_fast_in_one_line(drive, tmp_path):
         result = canest("batch", drive / "*.log", "--out", tmp_path / "out", "--scheduler", address,
                         "--connect-timeout", 2)
         elapsed = time.monotonic() - started
-    line = one_line_error(result)
+    line = one_line_error(result, ClusterError)
     assert line.startswith(f"canest: error: --scheduler {address}: cannot connect to a Dask scheduler (")
     assert line.endswith("--connect-timeout (now 2 s)")
     assert not (tmp_path / "out").exists()
@@ -81,5 +83,6 @@ def test_unreachable_scheduler_fails_fast_in_one_line(drive, tmp_path):
 
 
 def test_malformed_scheduler_address_is_one_line(drive, tmp_path):
-    line = one_line_error(canest("batch", drive / "*.log", "--out", tmp_path / "out", "--scheduler", "nowhere"))
+    line = one_line_error(canest("batch", drive / "*.log", "--out", tmp_path / "out", "--scheduler", "nowhere"),
+                          ClusterError)
     assert "--scheduler nowhere" in line and "missing port number" in line

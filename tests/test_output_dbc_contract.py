@@ -4,6 +4,7 @@ import sys
 
 import cantools
 import pytest
+import yaml
 
 from canest.codec.encode import EstimateEncoder
 from canest.errors import DbcError
@@ -72,10 +73,12 @@ def test_the_reference_dbc_is_complete():
 @pytest.mark.parametrize("command", ["check", "replay"])
 def test_command_line_error_is_one_line(tmp_path, command):
     dbc = edited_dbc(tmp_path / "no_status.dbc", lambda db: without_message(db, "CE_Status"))
+    doc = yaml.safe_load(CONFIG.read_text())
+    if ":" not in doc["input"]["dbc"]:  # a path relative to the config's folder; else a built-in's name
+        doc["input"]["dbc"] = str((CONFIG.parent / doc["input"]["dbc"]).resolve())
+    doc["output"]["dbc"] = str(dbc)
     config = tmp_path / "car.yaml"
-    config.write_text(CONFIG.read_text()
-                      .replace("dbc: ../dbc/canest_vehicle.dbc", f"dbc: {ROOT / 'dbc' / 'canest_vehicle.dbc'}")
-                      .replace("dbc: ../dbc/canest_estimates.dbc", f"dbc: {dbc}"))
+    config.write_text(yaml.safe_dump(doc))
     log = tmp_path / "drive.log"
     log.write_text("(0.000000) vcan0 130#0000000000000000\n")
     args = ["check", "--config", config] if command == "check" else \
