@@ -88,3 +88,9 @@ class FileIOError(CanestError):
     """Reading or writing a file failed midway (disk full, file size limit, device error)."""
 
     exit_status = 74
+
+
+class ClusterError(CanestError):
+    """A Dask scheduler that cannot be reached or refuses the connection."""
+
+    exit_status = 69

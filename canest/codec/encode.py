@@ -17,7 +17,8 @@ import can
 from canest.codec import integrity
 from canest.codec.dbc import clamp_to_signal, load_database
 from canest.codec.decode import InputDecoder
-from canest.estimation.estimate import CAN_VALID_BITS, Estimate
+from canest.errors import DbcError
+from canest.estimation.estimate import CAN_VALID_BITS, MODES, Estimate
 from canest.settings import Config
 from canest.signals import WHEELS
 
@@ -46,6 +47,7 @@ STATUS_MESSAGE = "CE_Status"
 CAUSE_MESSAGE = "CE_ValidityCause"
 CAUSE_SIGNALS = {"VxCause": "vx", "YawRateCause": "yaw_rate", "SideslipCause": "beta", "ForcesCause": "forces",
                  "FrictionCause": "friction"}
+STATUS_SIGNALS = ("FilterId", "Mode", "ValidFlags", "MissingInputs", "ResetCount", "InnovationNis")
 
 
 def integrity_signals(message):
@@ -53,6 +55,27 @@ def integrity_signals(message):
     counter = next(s for s in message.signals if s.name.endswith("_Counter"))
     checksum = next(s for s in message.signals if s.name.endswith("_CRC"))
     return counter, checksum
+
+
+def contract_gaps(database) -> list:
+    """What the output DBC lacks of canest's contract: messages, signals, counter and CRC, Mode values."""
+    required = {**{name: list(fields) for name, fields in OUTPUT_MESSAGES.items()},
+                STATUS_MESSAGE: list(STATUS_SIGNALS), CAUSE_MESSAGE: list(CAUSE_SIGNALS)}
+    gaps = []
+    for name, signals in required.items():
+        try:
+            message = database.get_message_by_name(name)
+        except KeyError:
+            gaps.append(f"message {name}")
+            continue
+        present = {s.name: s for s in message.signals}
+        gaps += [f"signal {name}.{signal}" for signal in signals if signal not in present]
+        gaps += [f"a *_{suffix} signal in {name}" for suffix in ("Counter", "CRC")
+                 if not any(s.endswith(f"_{suffix}") for s in present)]
+        if name == STATUS_MESSAGE and "Mode" in present:
+            named = {str(v) for v in (present["Mode"].choices or {}).values()}
+            gaps += [f"value {mode!r} of {name}.Mode" for mode in MODES if mode not in named]
+    return gaps
 
 
 class _Sender:
@@ -81,11 +104,15 @@ class EstimateEncoder:
 
     def __init__(self, dbc_path, channel=None):
         self.database = load_database(dbc_path, "output.dbc")
+        gaps = contract_gaps(self.database)
+        if gaps:
+            raise DbcError(f"{dbc_path}: output DBC lacks {', '.join(gaps)}; start from dbc/canest_estimates.dbc "
+                           "(README 'DBC contract')")
         self.channel = channel
         self.senders = {name: _Sender(self.database.get_message_by_name(name))
                         for name in (*OUTPUT_MESSAGES, STATUS_MESSAGE, CAUSE_MESSAGE)}
         status = self.senders[STATUS_MESSAGE].signals
-        self.filter_ids = {str(v): k for k, v in status["FilterId"].choices.items()}
+        self.filter_ids = {str(v): k for k, v in (status["FilterId"].choices or {}).items()}
         self.mode_ids = {str(v): k for k, v in status["Mode"].choices.items()}
 
     def encode(self, estimate: Estimate) -> list:

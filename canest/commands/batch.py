@@ -1,12 +1,15 @@
 """canest batch: re-estimate many logs on a Dask cluster (local by default)."""
 from __future__ import annotations
 
+import signal
 import time
+from contextlib import contextmanager
 from pathlib import Path
 
-from canest.apps.batch import fleet_table, plot_errors, run_batch
+from canest.apps.batch import CONNECT_TIMEOUT_S, FLEET_SUMMARY, Stop, fleet_table, plot_errors, run_batch
 from canest.commands.common import FORMATTER, add_config, config_from_args
 from canest.apps.compare import parse_filters
+from canest.errors import DependencyError
 
 EPILOG = """examples:
   canest batch 'logs/**/*.log' --config configs/dici_ev.yaml --out results/
@@ -14,9 +17,17 @@ EPILOG = """examples:
   canest batch 'fleet/**/*.log' --out results/ --scheduler tcp://scheduler:8786
 
 Each (log, filter) is one task. Results: OUT/<log>/<filter>/estimates.csv and
-summary.json, and OUT/fleet_summary.csv. A truth file beside a log
-(<log>.truth.csv or <log>_truth.csv) adds RMSE columns. Rerunning skips the
-tasks whose results are complete; a corrupt log fails only its own task.
+summary.json, <log> being the log's path below the folder the patterns start
+in, suffix kept (logs/day1/a.log -> OUT/day1/a.log/ckf/), and
+OUT/fleet_summary.csv. A truth file beside a log adds RMSE columns: for a.log
+the first of a.log.truth.csv, a.log_truth.csv, a.truth.csv, a_truth.csv.
+Rerunning skips the tasks whose results are complete and whose config, DBCs,
+log and truth file are unchanged; a corrupt log fails only its own task.
+SIGINT or SIGTERM: no new tasks, the running ones finish (a second signal
+cancels them), the fleet summary lists the rest as stopped; rerun to resume.
+Exit status: 0 all tasks done (also after such a stop), 1 some task failed;
+an error before any task ran (config, DBC, missing dask, unreachable
+scheduler, ...) is one line with the status of its kind (canest --help).
 On a multi-node cluster the logs, the config, its DBCs and OUT must be on a
 file system every worker sees (start workers with: dask worker tcp://HOST:8786)."""
 
@@ -29,6 +40,8 @@ def register(subparsers) -> None:
     p.add_argument("--out", "-o", required=True, help="results folder")
     p.add_argument("--filters", default=None, help="comma-separated filters to sweep (default: the config's)")
     p.add_argument("--scheduler", help="address of a running Dask scheduler, e.g. tcp://host:8786")
+    p.add_argument("--connect-timeout", type=float, default=CONNECT_TIMEOUT_S, metavar="SECONDS",
+                   help=f"give up on --scheduler after this long (default {CONNECT_TIMEOUT_S:g})")
     p.add_argument("--workers", type=int, help="worker processes of the local cluster (default: one per core)")
     p.add_argument("--retries", type=int, default=1,
                    help="retries of a task that raised (default 1); tasks of a lost worker are rerun anyway")
@@ -37,20 +50,43 @@ def register(subparsers) -> None:
     p.set_defaults(func=run)
 
 
+@contextmanager
+def stop_on_signals(stop: Stop):
+    """SIGINT and SIGTERM request ``stop`` (instead of ending the process) while the block runs."""
+    def handler(signum, _frame):
+        stop.request(signal.Signals(signum).name)
+
+    previous = {signum: signal.signal(signum, handler) for signum in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield
+    finally:
+        for signum, action in previous.items():
+            signal.signal(signum, action)
+
+
 def run(args) -> int:
+    DependencyError.require("dask.distributed", "canest batch", "pip install 'canest[fleet]'")
+    if args.plot:  # before the batch, not after it
+        DependencyError.require("matplotlib", "--plot", "pip install 'canest[plot]'")
     config = config_from_args(args)
     filters = parse_filters(args.filters) if args.filters else [config.estimator.filter]
     started = time.perf_counter()
-    rows = run_batch(config, args.logs, Path(args.out), filters, args.scheduler, args.workers, args.retries,
-                     progress=not args.quiet)
+    stop = Stop()
+    with stop_on_signals(stop):
+        rows = run_batch(config, args.logs, Path(args.out), filters, args.scheduler, args.workers, args.retries,
+                         progress=not args.quiet, stop=stop, connect_timeout=args.connect_timeout)
     elapsed = time.perf_counter() - started
     print(fleet_table(rows))
     ran = [r for r in rows if r["status"] == "ok"]
     hours = sum(r["duration_s"] for r in ran) / 3600.0
     print(f"{len(rows)} tasks in {elapsed:.1f} s: {60 * len(rows) / elapsed:.1f} tasks/min, "
-          f"{60 * hours / elapsed:.3f} drive-hours/min; summary in {Path(args.out) / 'fleet_summary.csv'}")
+          f"{60 * hours / elapsed:.3f} drive-hours/min; summary in {Path(args.out) / FLEET_SUMMARY}")
+    stopped = [r for r in rows if r["status"] == "stopped"]
+    if stop.requested:
+        print(f"stopped by {stop.reason}: {len(stopped)} of {len(rows)} tasks not done; "
+              "run the same command again to resume")
     if args.plot:
         plot_errors(rows, args.plot)
         print(f"plot written to {args.plot}")
-    failed = [r for r in rows if r["status"] != "ok"]
+    failed = [r for r in rows if r["status"] == "failed"]
     return 1 if failed else 0

@@ -4,6 +4,7 @@ from __future__ import annotations
 from canest.commands.common import FORMATTER, add_config, config_from_args
 from canest.apps.compare import format_comparison, parse_filters, plot_comparison, run_filter
 from canest.apps.evaluate import read_table
+from canest.errors import DependencyError
 
 EPILOG = """examples:
   canest simulate --maneuver dlc --speed 80 --mu 0.85 -o dlc.log --truth dlc.csv
@@ -28,6 +29,8 @@ def register(subparsers) -> None:
 
 
 def run(args) -> int:
+    if args.plot:  # before the replays, not after them
+        DependencyError.require("matplotlib", "--plot", "pip install 'canest[plot]'")
     config = config_from_args(args)
     names = parse_filters(args.filters)
     truth = read_table(args.truth)
