@@ -21,7 +21,8 @@ from canest.apps.replay import play, replay
 EPILOG = """examples:
   canest replay drive.log --out est.log --csv est.csv
   canest replay drive.blf --config configs/dckf_1525kg.yaml --csv est.csv
-  canest replay drive.log --realtime --channel vcan0      # like canplayer, for a running daemon
+  canest replay drive.log --realtime -c vcan0             # like canplayer, for a running daemon
+  canest replay drive.log --realtime -i udp_multicast -c 239.74.163.2 --rate 2   # no SocketCAN (canest run --help)
   candump -L vcan0 | canest replay - --csv - | head       # a pipe: stdin in, CSV rows out as ticks complete
   canest replay drive.log --json                           # the frame summary as one JSON object
 
@@ -62,7 +63,7 @@ def register(subparsers) -> None:
                               description=__doc__, epilog=EPILOG, formatter_class=FORMATTER)
     p.add_argument("log", help="input log: .log (candump), .asc, .blf, .trc, .csv, .mf4, ... (any python-can reads); "
                                "- for standard input")
-    add_config(p)
+    add_config(p, short_option=False)
     p.add_argument("--format", "-f", choices=STREAM_FORMATS,
                    help="format of the log where its name does not say it (standard input: default log, candump -L)")
     p.add_argument("--out", "-o", help="write the estimate frames to this log (format by suffix; - for candump text "
