@@ -36,7 +36,7 @@ CANRC = "[default]\ninterface = udp_multicast\nchannel = 239.74.163.9\nbitrate =
 def test_python_cans_canrc_applies_below_the_command_line(monkeypatch, tmp_path):
     config = resolved(["run"], monkeypatch, tmp_path, CANRC)
     assert (config.input_bus.interface, config.input_bus.channel) == ("udp_multicast", "239.74.163.9")
-    assert config.input_bus.options == {"fd": True, "bitrate": 250000}  # the built-in config's fd: true, and python-can's
+    assert config.input_bus.options == {"fd": True, "bitrate": 250000}  # built-in fd, python-can bitrate
     assert config.output_bus.interface == "udp_multicast"  # the output bus takes python-can's interface only
     config = resolved(["run", "-c", "239.74.163.7", "-b", "500000", "--fd", "--bus-kwargs", "port=43999",
                        "--bus-option", "receive_own_messages=true"], monkeypatch, tmp_path, CANRC)

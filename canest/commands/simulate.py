@@ -23,10 +23,11 @@ EPILOG = """examples:
 
 The log is encoded through the config's input DBC and signal map, each message
 at its DBC cycle time; its format follows the suffix (.log candump, .asc,
-.blf, .trc, .csv, .mf4), candump text on standard output for --out -. The truth CSV has the estimate CSV's columns (t, vx, vy,
-beta, yaw_rate; SI units, rad) plus ax, ay, delta, and per wheel fx_, fy_,
-fz_, mu_, alpha_, kappa_, w_ (wheel speed, rad/s), torque_ (fl, fr, rl, rr).
-Both are written to a temporary file and renamed when complete; an existing
+.blf, .trc, .csv, .mf4), candump text on standard output for --out -. The
+truth CSV has the estimate CSV's columns (t, vx, vy, beta, yaw_rate; SI units,
+rad) plus ax, ay, delta, and per wheel fx_, fy_, fz_, mu_, alpha_, kappa_, w_
+(wheel speed, rad/s), torque_ (fl, fr, rl, rr). Both are written to a
+temporary file and renamed when complete; an existing
 file is replaced, an input (config, DBC) never."""
 
 
