@@ -169,3 +169,43 @@ def test_monitor_once_without_a_daemon_exits_69():
     assert result.returncode == 69
     assert result.stderr.splitlines() == ["canest: error: udp_multicast:239.74.163.4: no estimate frames within 1 s; "
                                           "is the daemon running and sending on this bus?"]
+
+
+def test_a_drive_round_trips_through_mf4_with_identical_estimates(config, tmp_path):
+    """canest simulate --out x.mf4 keeps every frame's timestamp exactly: the replay of the MF4 gives the estimates
+    of the simulation's own frames, bit for bit; replay --out est.mf4 writes the estimate frames of --out est.log."""
+    pytest.importorskip("asammdf", reason="MF4 needs the mf4 extra: pip install 'canest[mf4]'")
+    from canest.apps.replay import replay
+    from canest.pipeline import Pipeline
+    from canest.sim.simulate import simulate
+
+    drive, truth = tmp_path / "drive.mf4", tmp_path / "truth.csv"
+    result = subprocess.run([*CANEST, "simulate", "--config", CONFIG, "--maneuver", "sine", "--duration", "3",
+                             "--out", drive, "--truth", truth], capture_output=True, text=True, cwd=ROOT)
+    assert result.returncode == 0, result.stderr
+    pipeline = Pipeline(config, output_channel=config.output_bus.channel)
+    expected = [e for msg in simulate(config, "sine", 80.0, 0.85, duration=3.0).frames for e in pipeline.feed(msg)]
+    read_back = []
+    replay(config, drive, progress=False, on_estimate=read_back.append)
+    assert [(e.t, e.values, e.valid_flags) for e in read_back] == [(e.t, e.values, e.valid_flags) for e in expected]
+
+    for suffix in (".mf4", ".log"):
+        out = subprocess.run([*CANEST, "replay", drive, "--config", CONFIG, "--out", tmp_path / f"est{suffix}", "-q"],
+                             capture_output=True, text=True, cwd=ROOT)
+        assert out.returncode == 0, out.stderr
+    import can
+
+    mf4, log = list(can.LogReader(str(tmp_path / "est.mf4"))), list(can.LogReader(str(tmp_path / "est.log")))
+    assert len(mf4) == len(log) > 0
+    assert [(m.arbitration_id, bytes(m.data)) for m in mf4] == [(m.arbitration_id, bytes(m.data)) for m in log]
+    assert max(abs(a.timestamp - b.timestamp) for a, b in zip(mf4, log)) < 1e-6  # candump keeps 6 decimals
+
+
+def test_mf4_without_asammdf_is_one_line_exit_69(tmp_path):
+    code = ("import sys; sys.modules['asammdf'] = None; from canest.cli import main; "
+            f"main(['simulate', '--out', {str(tmp_path / 'x.mf4')!r}, '--truth', {str(tmp_path / 't.csv')!r}])")
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT)
+    assert result.returncode == 69
+    assert len(result.stderr.splitlines()) == 1 and result.stderr.startswith(f"canest: error: {tmp_path / 'x.mf4'}: ")
+    assert "pip install 'canest[mf4]'" in result.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == []

@@ -143,7 +143,7 @@ def python_can_reader(path: Path):
     try:
         return can.LogReader(str(path))
     except (ImportError, NotImplementedError) as exc:  # the MF4 reader without asammdf
-        raise DependencyError(f"{path}: {exc}") from None
+        raise DependencyError(f"{path}: {exc}; pip install 'canest[mf4]'") from None
     except ValueError as exc:
         raise LogError(f"{path}: {exc}; canest reads .log (candump), .asc, .blf, .trc, .csv (also .gz), .db, .mf4") \
             from None

@@ -26,6 +26,8 @@ Frame sinks take an encoder (anything with ``encode(estimate) -> [can.Message]``
 from __future__ import annotations
 
 import csv
+import math
+from datetime import datetime, timezone
 
 import can
 
@@ -146,11 +148,37 @@ class LogSink(FileSink):
         self.logger.stop()
 
 
+def exact_mf4_writer(path):
+    """python-can's MF4 writer, its start time the first frame's second instead of the wall clock.
+
+    MF4 stores each timestamp relative to the file's start time. python-can's
+    writer takes the start from the clock when it opens, so a log whose clock
+    starts at 0 (a simulation) comes back 1e-7 s off; from a whole second at or
+    before the first frame every timestamp is written and read back exactly.
+    """
+    from can.io.mf4 import MF4Writer
+
+    class ExactMF4Writer(MF4Writer):
+        started = False
+
+        def on_message_received(self, msg: can.Message) -> None:
+            if not self.started and msg.timestamp is not None and math.isfinite(msg.timestamp):
+                start = float(math.floor(msg.timestamp))
+                self._mdf.header.start_time = datetime.fromtimestamp(start, timezone.utc)
+                self.last_timestamp = self._start_time = start
+            self.started = True
+            super().on_message_received(msg)
+
+    return ExactMF4Writer(path)
+
+
 def open_frame_writer(output: OutputFile):
     """python-can's writer for ``output`` (a ``can.Listener``): by suffix, or candump ``-L`` text on stdout."""
     try:
         if output.stdout:
             return can.CanutilsLogWriter(output.open_text())
+        if output.path.suffix.lower() == ".mf4":
+            return exact_mf4_writer(str(output.write_path))
         return can.Logger(str(output.write_path))
     except (ImportError, NotImplementedError) as exc:  # python-can's MF4 writer without asammdf
         output.discard()
