@@ -1,4 +1,4 @@
-# make demo : create .venv, install canest, run the live demo on virtual CAN (no vehicle, no root)
+# make demo : create .venv, install canest (no extras), run the live demo on virtual CAN (no vehicle, no root)
 # make test : also install the SocketCAN test lane (apt), run the tests on the host,
 #             then the real-vcan tests inside a User-Mode-Linux guest
 PYTHON ?= python3
@@ -12,13 +12,13 @@ demo: $(BIN)/canest
 
 test: test-host test-vcan
 
-test-host: $(BIN)/canest system-deps
+test-host: $(VENV)/.test-extras system-deps
 	$(BIN)/python -m pytest -m "not socketcan"
 
-test-vcan: $(BIN)/canest system-deps
+test-vcan: $(VENV)/.test-extras system-deps
 	tools/vcan-guest -- env CANEST_REQUIRE_SOCKETCAN=1 $(BIN)/python -m pytest -m socketcan
 
-setup: $(BIN)/canest system-deps
+setup: $(VENV)/.test-extras system-deps
 
 system-deps:
 	tools/install-system-deps
@@ -26,6 +26,10 @@ system-deps:
 $(BIN)/canest: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
+	$(BIN)/python -m pip install --quiet -e .
+	touch $@
+
+$(VENV)/.test-extras: $(BIN)/canest
 	$(BIN)/python -m pip install --quiet -e '.[test,fleet]'
 	touch $@
 

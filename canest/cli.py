@@ -2,19 +2,34 @@
 from __future__ import annotations
 
 import argparse
+import importlib
 import signal
 import sys
 
 from canest import __version__
-from canest.commands import batch, check, compare, demo, evaluate, monitor, replay, run, simulate
 from canest.errors import CanestError, FileIOError
+
+# command -> what `canest --help` lists; a command's module (and numpy, scipy, python-can behind it) is imported
+# only when that command runs or shows its own help, so `canest --version` and `canest --help` start fast
+COMMANDS = {
+    "demo": "live demonstration on virtual CAN with a simulated vehicle",
+    "run": "live daemon: estimate from a CAN bus, send estimates to a CAN bus",
+    "monitor": "live view of a running daemon's estimates and health",
+    "replay": "run a CAN log through the estimator, or play it onto a bus",
+    "simulate": "simulate a maneuver into a CAN log and a truth CSV",
+    "evaluate": "accuracy of estimates against truth (RMSE, MAE, plot)",
+    "compare": "run several filters on one log and compare accuracy and speed",
+    "batch": "replay many logs on a Dask cluster and summarize the fleet",
+    "check": "validate config and DBCs, print the resolved signal map",
+}
 
 DESCRIPTION = """canest: online vehicle state estimation on CAN.
 
 Decodes steering, wheel speeds, motor torques and IMU frames through a DBC,
 runs a nonlinear Kalman filter on a vehicle model at a fixed rate, and sends
-longitudinal velocity, yaw rate and sideslip (with standard deviations and
-validity) as CAN frames of an output DBC.
+longitudinal and lateral velocity, yaw rate, sideslip, tire lateral forces
+and road friction (with standard deviations and validity) as CAN frames of an
+output DBC.
 
 start here:
   canest demo                      simulated vehicle on virtual CAN, live, with an accuracy table
@@ -34,19 +49,24 @@ EPILOG = """exit status (as BSD sysexits.h):
 every error but 1 is one line: canest: error: FILE: what happened; what to do"""
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(argv=None) -> argparse.ArgumentParser:
+    """The parser; given ``argv``, only the command it names is registered in full (the others list their help)."""
     parser = argparse.ArgumentParser(prog="canest", description=DESCRIPTION, epilog=EPILOG,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--version", action="version", version=f"canest {__version__}")
     subparsers = parser.add_subparsers(title="commands", metavar="COMMAND", required=True)
-    for command in (demo, run, monitor, replay, simulate, evaluate, compare, batch, check):
-        command.register(subparsers)
+    named = None if argv is None else next((word for word in argv if word in COMMANDS), "")
+    for name, summary in COMMANDS.items():
+        if named is None or name == named:
+            importlib.import_module(f"canest.commands.{name}").register(subparsers)
+        else:
+            subparsers.add_parser(name, help=summary)
     return parser
 
 
 def main(argv=None) -> None:
     signal.signal(signal.SIGPIPE, signal.SIG_DFL)  # `canest check | head` ends quietly
-    args = build_parser().parse_args(argv)
+    args = build_parser(sys.argv[1:] if argv is None else argv).parse_args(argv)
     try:
         sys.exit(args.func(args))
     except CanestError as exc:  # a problem of the input: one line; anything else is a bug and keeps its traceback

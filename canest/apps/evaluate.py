@@ -19,12 +19,14 @@ from __future__ import annotations
 
 import csv
 import math
-from dataclasses import dataclass
+import sys
+from dataclasses import asdict, dataclass
 
 import numpy as np
 
 from canest.errors import TableError
 from canest.estimation.estimate import VALID_BITS
+from canest.io.outputs import is_stdio
 from canest.signals import WHEELS
 
 # state -> (display unit, factor from SI)
@@ -39,8 +41,8 @@ DISPLAY = {
 
 
 def read_table(path) -> dict:
-    """A CSV with a header as {column: np.ndarray}; non-numeric columns are kept as strings."""
-    with open(path, newline="") as handle:
+    """A CSV with a header as {column: np.ndarray}; non-numeric columns are kept as strings; ``-`` is stdin."""
+    with (open(sys.stdin.fileno(), newline="", closefd=False) if is_stdio(path) else open(path, newline="")) as handle:
         reader = csv.reader(handle)
         try:
             header = next(reader)
@@ -139,6 +141,24 @@ def score(estimate: dict, truth: dict, states=None, only_valid: bool = True, ski
     """A :class:`Score` per state; ``skip`` seconds at the start are ignored (filter convergence)."""
     states = states or [s for s in DISPLAY if s in estimate and s in truth]
     return [summarize(state, counts(estimate, truth, state, only_valid, skip)) for state in states]
+
+
+def align(estimate: dict, truth: dict, mode: str, offset: float = 0.0) -> dict:
+    """The estimate on the truth's clock: ``first`` moves its first tick onto the truth's first time, ``offset``
+    subtracts ``offset`` seconds (a live CSV has epoch timestamps, a simulated truth starts at 0), ``none`` keeps it."""
+    if mode == "none" or not estimate["t"].size:
+        return estimate
+    shift = estimate["t"][0] - truth["t"][0] if mode == "first" else offset
+    return {**estimate, "t": estimate["t"] - shift}
+
+
+def as_json(scores) -> dict:
+    """``{state: {unit, rmse, mae, max_error, samples, valid, cov1, cov2, cov3, nees, vbw, wrong_sign}}``, NaN as
+    null (JSON has no NaN)."""
+    def plain(value):
+        return None if isinstance(value, float) and not math.isfinite(value) else value
+
+    return {s.state: {k: plain(v) for k, v in asdict(s).items() if k != "state"} for s in scores}
 
 
 def format_table(scores, title: str = "") -> str:

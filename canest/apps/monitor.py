@@ -61,6 +61,24 @@ class Monitor:
         self.counters[message.name] = counter
         self.latest[message.name] = values
 
+    def complete(self) -> bool:
+        """Whether the status message and the velocity and yaw-rate estimates have arrived."""
+        return all(name in self.latest for name in (STATUS_MESSAGE, "CE_Velocity", "CE_YawSideslip"))
+
+    def line(self) -> str:
+        """The view as one line of ``key=value`` words, for a pipe or a log; an invalid state's value ends in ?."""
+        words = [f"t={time.time():.3f}", f"frames={self.counts['frames']}", f"crc_errors={self.counts['crc_errors']}",
+                 f"counter_gaps={self.counts['counter_gaps']}"]
+        status = self.latest.get(STATUS_MESSAGE)
+        if status is not None:
+            words += [f"mode={status['Mode']}", f"resets={status['ResetCount']}"]
+        for label, message, stem, unit, factor in ROWS:
+            values = self.latest.get(message)
+            if values is not None:
+                mark = "" if values[f"{stem}Valid"] else "?"
+                words.append(f"{label.replace(' ', '_')}={values[stem] * factor:.4g}{mark}")
+        return " ".join(words)
+
     def render(self, title: str) -> str:
         elapsed = max(time.monotonic() - self.started, 1e-9)
         c = self.counts
@@ -84,8 +102,10 @@ class Monitor:
         return "\n".join(lines)
 
 
-def run_monitor(bus: can.BusABC, database, title: str, out, refresh: float = 0.5, duration=None, clear=False):
-    """Print the view every ``refresh`` s until ``duration`` s have passed (or forever)."""
+def run_monitor(bus: can.BusABC, database, title: str, out, refresh: float = 0.5, duration=None, clear=False,
+                lines: bool = False, once: bool = False):
+    """Print the view every ``refresh`` s until ``duration`` s have passed (or forever); ``lines``: one line each
+    time (:meth:`Monitor.line`); ``once``: print once, when the estimates are complete (or at the end)."""
     monitor = Monitor(database)
     end = math.inf if duration is None else time.monotonic() + duration
     next_draw = time.monotonic()
@@ -93,8 +113,13 @@ def run_monitor(bus: can.BusABC, database, title: str, out, refresh: float = 0.5
         msg = bus.recv(timeout=min(refresh, max(end - time.monotonic(), 0.0)))
         if msg is not None:
             monitor.receive(msg)
-        if time.monotonic() >= next_draw:
+        if once and not monitor.complete():
+            continue
+        if once or time.monotonic() >= next_draw:
             next_draw += refresh
-            out.write(("\x1b[H\x1b[J" if clear else "\n") + monitor.render(title) + "\n")
+            view = monitor.line() if lines else ("\x1b[H\x1b[J" if clear else "\n") + monitor.render(title)
+            out.write(view + "\n")
             out.flush()
+            if once:
+                break
     return monitor

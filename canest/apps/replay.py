@@ -10,10 +10,9 @@ from __future__ import annotations
 
 import logging
 import math
-import os
+import sys
 import time
 from contextlib import ExitStack
-from pathlib import Path
 
 import can
 from tqdm import tqdm
@@ -28,9 +27,20 @@ PROGRESS_EVERY = 2000  # frames between progress-bar updates
 LOG = logging.getLogger("canest.replay")
 
 
+def progress_bar(source, desc: str, progress: bool):
+    """A bar on stderr that stays when done: bytes of a log file (with its total), else frames; none when
+    ``progress`` is off or stderr is not a terminal (a redirected stderr gets no bar)."""
+    size = source.size()
+    return tqdm(total=size, unit="B" if size else " frames", unit_scale=bool(size), desc=f"{desc} {source.path.name}",
+                disable=not (progress and sys.stderr.isatty()), leave=True)
+
+
 def replay(config: Config, log_path, out_log=None, out_csv=None, progress: bool = True, on_estimate=None,
-           step_times=None, stop=None) -> dict:
+           step_times=None, stop=None, log_format=None) -> dict:
     """Run a log through the pipeline as fast as possible; return the frame summary.
+
+    ``log_path`` ``-`` reads standard input as it arrives (``log_format``: see :class:`canest.io.logfiles.LogSource`);
+    ``out_log`` or ``out_csv`` ``-`` writes standard output.
 
     ``step_times``, a list, receives the seconds of every filter predict + update. ``stop``, anything with
     ``is_set()`` (a ``threading.Event``): once set, reading stops after the current frame, the outputs are
@@ -38,7 +48,7 @@ def replay(config: Config, log_path, out_log=None, out_csv=None, progress: bool 
     """
     pipeline = Pipeline(config, output_channel=config.output_bus.channel)
     pipeline.estimator.step_times = step_times
-    source = open_log(log_path)
+    source = open_log(log_path, log_format)
     frames = iter(source)
     stopped = False
     try:
@@ -48,16 +58,15 @@ def replay(config: Config, log_path, out_log=None, out_csv=None, progress: bool 
                 CsvSink(out_csv, states, staged=True) if out_csv else None,
                 LogSink(out_log, pipeline.encoder, staged=True) if out_log else None,
                 CallbackSink(on_estimate) if on_estimate else None) if sink is not None]
-            bar = stack.enter_context(tqdm(total=os.path.getsize(log_path), unit="B", unit_scale=True,
-                                           desc=f"replay {Path(log_path).name}", disable=None if progress else True,
-                                           leave=False))
+            bar = stack.enter_context(progress_bar(source, "replay", progress))
+            by_bytes = bar.total is not None
             for count, msg in enumerate(frames, 1):
                 estimates = pipeline.feed(msg)
                 if estimates:
                     for sink in sinks:
                         sink.publish(estimates)
                 if count % PROGRESS_EVERY == 0:
-                    bar.update(source.position() - bar.n)
+                    bar.update(source.position() - bar.n if by_bytes else PROGRESS_EVERY)
                 if stop is not None and stop.is_set():
                     stopped = True
                     break
@@ -69,15 +78,15 @@ def replay(config: Config, log_path, out_log=None, out_csv=None, progress: bool 
     return {"frames": 0, **pipeline.summary(), **source.damage.summary(), **({"stopped": 1} if stopped else {})}
 
 
-def play(log_path, bus: can.BusABC, speed: float = 1.0, progress: bool = True) -> int:
+def play(log_path, bus: can.BusABC, speed: float = 1.0, progress: bool = True, log_format=None) -> int:
     """Send a log's frames onto ``bus`` at their recorded timing (like canplayer); return frames sent.
 
     A frame without a finite timestamp has no place in time and is not sent; those and what could not be read
     are warned about (logger ``canest.replay``)."""
-    reader = open_log(log_path)
+    reader = open_log(log_path, log_format)
     try:
         timed = (msg for msg in reader if math.isfinite(msg.timestamp))
-        sent = play_messages(timed, bus, speed, progress, desc=f"play {Path(log_path).name}")
+        sent = play_messages(timed, bus, speed, progress and sys.stderr.isatty(), desc=f"play {reader.path.name}")
     finally:
         reader.stop()
     for warning in reader.warnings():
@@ -92,7 +101,7 @@ def play_messages(messages, bus: can.BusABC, speed: float = 1.0, progress: bool 
     """Send messages at the spacing of their timestamps divided by ``speed``; ``stop`` (an Event) ends early."""
     sent = 0
     start_wall = start_log = None
-    with tqdm(desc=desc, unit=" frames", disable=None if progress else True, leave=False) as bar:
+    with tqdm(desc=desc, unit=" frames", disable=not progress, leave=True) as bar:
         for msg in messages:
             if stop is not None and stop.is_set():
                 break

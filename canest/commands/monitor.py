@@ -1,48 +1,64 @@
-"""canest monitor: a live terminal view of the estimates a running daemon sends."""
+"""canest monitor: a live view of the estimates a running daemon sends."""
 from __future__ import annotations
 
 import sys
 
-from canest.io.bus import open_bus
-from canest.commands.common import FORMATTER, add_config
-from canest.codec.dbc import load_database
-from canest.config import DEFAULT_CONFIG, load_config
-from canest.apps.monitor import run_monitor
+from canest.commands.common import FORMATTER, add_bus_overrides, add_config, config_from_args
+from canest.errors import BusOpenError
 
 EPILOG = """examples:
-  canest monitor --channel vcan1
+  canest monitor -c vcan1
   canest monitor --config configs/dici_ev.yaml          # the config's output bus
-  canest monitor --interface virtual --channel out --duration 5
+  canest monitor -i udp_multicast -c 239.74.163.3       # a daemon in another process, no SocketCAN
+  canest monitor -c vcan1 --once                        # one snapshot for a script, then exit
 
 Shows each estimate with its standard deviation and validity, the status
 message (filter, mode, missing inputs, resets, NIS), and the stream's own
-health: frame rate, CRC failures and rolling-counter gaps."""
+health: frame rate, CRC failures and rolling-counter gaps. On a terminal the
+view is redrawn in place; when standard output is not a terminal (a pipe, a
+file) each refresh is one line: frames=N mode=M vx=... yaw_rate=... (a state
+flagged invalid ends in '?'). --once prints one view (or line) as soon as the
+status message and the estimates have arrived, and exits; 69 when nothing
+arrived within --duration (default 5 s with --once)."""
+
+
+class NoEstimates(BusOpenError):
+    """The watched bus carried no estimates in time (EX_UNAVAILABLE: the daemon is not there)."""
+
+    exit_status = 69
 
 
 def register(subparsers) -> None:
     p = subparsers.add_parser("monitor", help="live view of a running daemon's estimates and health",
                               description=__doc__, epilog=EPILOG, formatter_class=FORMATTER)
-    add_config(p)
-    p.add_argument("--interface", help="python-can interface (default: the config's output bus)")
-    p.add_argument("--channel", help="channel to watch (default: the config's output bus, e.g. vcan1)")
+    add_config(p, short_option=False)
+    add_bus_overrides(p, "watched bus (default: the config's output bus)", output=False)
     p.add_argument("--refresh", type=float, default=0.5, help="seconds between redraws (default 0.5)")
     p.add_argument("--duration", type=float, help="stop after this many seconds (default: until Ctrl-C)")
+    p.add_argument("--once", action="store_true", help="print one view once the estimates have arrived, then exit")
+    p.add_argument("--lines", action="store_true", help="one line per refresh even on a terminal")
     p.set_defaults(func=run)
 
 
 def run(args) -> int:
-    config = load_config(args.config or DEFAULT_CONFIG)  # its --interface/--channel name the watched bus
+    from canest.apps.monitor import run_monitor
+    from canest.codec.dbc import load_database
+    from canest.io.bus import open_bus
+
+    config = config_from_args(args)
     bus_config = config.output_bus
-    kwargs = {**bus_config.kwargs(), "interface": args.interface or bus_config.interface,
-              "channel": args.channel or bus_config.channel}
     database = load_database(config.output_dbc, "monitor")
-    bus = open_bus(kwargs, "monitored")
+    bus = open_bus(bus_config.kwargs(), "monitored")
+    line_mode = args.lines or not sys.stdout.isatty()
+    duration = 5.0 if args.once and args.duration is None else args.duration
     try:
-        run_monitor(bus, database, f"{kwargs['interface']}:{kwargs['channel']}", sys.stdout, args.refresh,
-                    args.duration, clear=sys.stdout.isatty())
+        monitor = run_monitor(bus, database, f"{bus_config.interface}:{bus_config.channel}", sys.stdout,
+                              args.refresh, duration, clear=not line_mode, lines=line_mode, once=args.once)
     except KeyboardInterrupt:
-        pass
+        return 0
     finally:
         bus.shutdown()
+    if args.once and not monitor.complete():
+        raise NoEstimates(f"{bus_config.interface}:{bus_config.channel}: no estimate frames within {duration:g} s; "
+                          "is the daemon running and sending on this bus?")
     return 0
-

@@ -1,6 +1,8 @@
 """canest replay: estimate offline from a log, or play a log onto a bus."""
 from __future__ import annotations
 
+import argparse
+import json
 import logging
 import math
 import signal
@@ -10,7 +12,8 @@ from contextlib import contextmanager
 from canest.config import DEFAULT_CONFIG
 from canest.errors import UsageError
 from canest.io.bus import open_bus
-from canest.io.outputs import check_outputs
+from canest.io.logfiles import STREAM_FORMATS
+from canest.io.outputs import check_outputs, is_stdio
 from canest.commands.common import FORMATTER, add_bus_overrides, add_config, config_from_args
 from canest.pipeline import format_summary
 from canest.apps.replay import play, replay
@@ -18,7 +21,16 @@ from canest.apps.replay import play, replay
 EPILOG = """examples:
   canest replay drive.log --out est.log --csv est.csv
   canest replay drive.blf --config configs/dckf_1525kg.yaml --csv est.csv
-  canest replay drive.log --realtime --channel vcan0      # like canplayer, for a running daemon
+  canest replay drive.log --realtime -c vcan0             # like canplayer, for a running daemon
+  canest replay drive.log --realtime -i udp_multicast -c 239.74.163.2 --rate 2   # no SocketCAN (canest run --help)
+  candump -L vcan0 | canest replay - --csv - | head       # a pipe: stdin in, CSV rows out as ticks complete
+  canest replay drive.log --json                           # the frame summary as one JSON object
+
+- as the log reads standard input as it arrives (candump -L text; --format
+for asc, trc, csv or blf); - as --csv or --out writes standard output (--out -
+as candump text). Standard input is read line by line (bounded memory), and
+the ticks follow the stream's timestamps. With an output on standard output
+the frame summary goes to stderr.
 
 Offline, the log is read as fast as possible and every frame is accounted for
 in the summary printed at the end (decoded, ignored by ID, rejected by cause).
@@ -49,14 +61,23 @@ no outputs)."""
 def register(subparsers) -> None:
     p = subparsers.add_parser("replay", help="run a CAN log through the estimator, or play it onto a bus",
                               description=__doc__, epilog=EPILOG, formatter_class=FORMATTER)
-    p.add_argument("log", help="input log: .log (candump), .asc, .blf, .trc, .csv, ... (any python-can reads)")
-    add_config(p)
-    p.add_argument("--out", "-o", help="write the estimate frames to this log (format by suffix)")
-    p.add_argument("--csv", help="write one row per tick to this CSV")
+    p.add_argument("log", help="input log: .log (candump), .asc, .blf, .trc, .csv, .mf4, ... (any python-can reads); "
+                               "- for standard input")
+    add_config(p, short_option=False)
+    p.add_argument("--format", "-f", choices=STREAM_FORMATS,
+                   help="format of the log where its name does not say it (standard input: default log, candump -L)")
+    p.add_argument("--out", "-o", help="write the estimate frames to this log (format by suffix; - for candump text "
+                                       "on standard output)")
+    p.add_argument("--csv", help="write one row per tick to this CSV (- for standard output)")
+    p.add_argument("--json", action="store_true", help="print the frame summary as one JSON object (the keys of "
+                                                      "the text summary)")
     p.add_argument("--realtime", action="store_true",
                    help="instead of estimating, send the log's frames onto the input bus at recorded timing")
-    p.add_argument("--speed", type=float, default=1.0, help="with --realtime: playback speed factor (default 1)")
-    p.add_argument("--quiet", "-q", action="store_true", help="no progress bar")
+    p.add_argument("--rate", "--playback-speed", dest="rate", type=float, default=None,
+                   help="with --realtime: playback speed factor, 2 = twice as fast (default 1)")
+    p.add_argument("--speed", dest="old_speed", type=float, help=argparse.SUPPRESS)
+    p.add_argument("--quiet", "-q", action="store_true", help="no progress bar (there is none when stderr is not "
+                                                              "a terminal)")
     add_bus_overrides(p)
     p.set_defaults(func=run)
 
@@ -98,29 +119,45 @@ def warnings_to_stderr() -> None:
     logger.propagate = False
 
 
+def playback_rate(args) -> float:
+    """--rate (or the deprecated --speed, which said the same but read like simulate's km/h)."""
+    option, rate = ("--rate", args.rate) if args.old_speed is None else ("--speed", args.old_speed)
+    if rate is None:
+        return 1.0
+    if not args.realtime:
+        raise UsageError(f"{option} is the playback speed of --realtime; offline replay runs as fast as it can")
+    if not (math.isfinite(rate) and rate > 0):
+        raise UsageError(f"{option}: a playback speed factor above 0, e.g. 1 or 10, got {rate}")
+    if option == "--speed":
+        print(f"canest: warning: replay --speed is deprecated (simulate's --speed is km/h); type --rate {rate:g} "
+              "now", file=sys.stderr)
+    return rate
+
+
 def run(args) -> int:
     config = config_from_args(args)
     warnings_to_stderr()
+    rate = playback_rate(args)
     if args.realtime:
         if args.out or args.csv:
             raise UsageError("--realtime plays the log onto a bus; --out and --csv belong to offline replay")
-        if not (math.isfinite(args.speed) and args.speed > 0):
-            raise UsageError(f"--speed: a playback speed factor above 0, e.g. 1 or 10, got {args.speed}")
         bus = open_bus(config.input_bus.kwargs(), "playback")
         try:
-            sent = play(args.log, bus, speed=args.speed, progress=not args.quiet)
+            sent = play(args.log, bus, speed=rate, progress=not args.quiet, log_format=args.format)
         finally:
             bus.shutdown()
         print(f"sent {sent} frames to {config.input_bus.interface}:{config.input_bus.channel}")
         return 0
-    if not (args.out or args.csv):
+    if not (args.out or args.csv or args.json):
         print("note: neither --out nor --csv given; only the frame summary is printed", file=sys.stderr)
     check_outputs({"--out": args.out, "--csv": args.csv},
                   {"the input log": args.log, "the config": args.config or DEFAULT_CONFIG,
                    "the input DBC": config.input_dbc, "the output DBC": config.output_dbc})
     with StopRequest().on_signals() as stop:
-        summary = replay(config, args.log, out_log=args.out, out_csv=args.csv, progress=not args.quiet, stop=stop)
-    print(format_summary(summary))
+        summary = replay(config, args.log, out_log=args.out, out_csv=args.csv, progress=not args.quiet, stop=stop,
+                         log_format=args.format)
+    report = sys.stderr if is_stdio(args.out) or is_stdio(args.csv) else sys.stdout
+    print(json.dumps(summary, sort_keys=True) if args.json else format_summary(summary), file=report)
     if stop.is_set():
         print(f"canest: replay stopped by {stop.signal} after {summary.get('frames', 0)} frames; the outputs are "
               "complete up to the last tick", file=sys.stderr)

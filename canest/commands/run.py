@@ -12,8 +12,15 @@ from canest.apps.service import Service
 
 EPILOG = """examples:
   canest run --config configs/dici_ev.yaml                 # vcan0 -> vcan1 as configured
-  canest run --config my_car.yaml --channel can0 --output-channel can0
-  canest run --interface virtual --channel in --output-channel out
+  canest run --config my_car.yaml -c can0 --output-channel can0 -b 500000
+  canest run -i udp_multicast -c 239.74.163.2 --output-channel 239.74.163.3   # no SocketCAN: see below
+
+Without SocketCAN, processes on one machine share a bus through python-can's
+udp_multicast interface (loopback multicast; virtual stays inside one
+process). In three terminals:
+  canest run -i udp_multicast -c 239.74.163.2 --output-channel 239.74.163.3
+  canest monitor -i udp_multicast -c 239.74.163.3
+  canest replay drive.log --realtime -i udp_multicast -c 239.74.163.2
 
 Signals: SIGINT/SIGTERM stop cleanly and print where every input frame went;
 SIGHUP reloads the config (buses reopened only if their settings changed);
@@ -24,7 +31,7 @@ reports READY, WATCHDOG and STATUS; see tools/systemd/."""
 def register(subparsers) -> None:
     p = subparsers.add_parser("run", help="live daemon: estimate from a CAN bus, send estimates to a CAN bus",
                               description=__doc__, epilog=EPILOG, formatter_class=FORMATTER)
-    add_config(p)
+    add_config(p, short_option=False)
     add_bus_overrides(p)
     p.add_argument("--csv", help="also write one row per tick to this CSV")
     p.add_argument("--log-level", default="INFO", choices=["DEBUG", "INFO", "WARNING", "ERROR"],

@@ -9,7 +9,8 @@ from tqdm import tqdm
 from canest.config import DEFAULT_CONFIG
 from canest.errors import UsageError
 from canest.commands.common import FORMATTER, add_config, config_from_args
-from canest.io.outputs import OutputFile, check_outputs
+from canest.io.outputs import OutputFile, check_outputs, is_stdio
+from canest.io.sinks import open_frame_writer
 from canest.sim.maneuvers import MANEUVERS
 from canest.sim.simulate import simulate
 
@@ -18,13 +19,15 @@ EPILOG = """examples:
   canest simulate --maneuver sine --speed 80 --mu 0.35 --out sine.blf --truth sine.csv --outliers 0.02
   canest simulate --maneuver step --mu 0.85,0.85,0.3,0.3 --out split.log --truth split.csv
   canest simulate --maneuver sine --speed 60 --mu 0.85 --mu-jump 6:0.35 --out jump.log --truth jump.csv
+  canest simulate --out - --truth truth.csv | canest replay - --csv est.csv    # candump text through a pipe
 
 The log is encoded through the config's input DBC and signal map, each message
 at its DBC cycle time; its format follows the suffix (.log candump, .asc,
-.blf, .trc, .csv). The truth CSV has the estimate CSV's columns (t, vx, vy,
-beta, yaw_rate; SI units, rad) plus ax, ay, delta, and per wheel fx_, fy_,
-fz_, mu_, alpha_, kappa_, w_ (wheel speed, rad/s), torque_ (fl, fr, rl, rr).
-Both are written to a temporary file and renamed when complete; an existing
+.blf, .trc, .csv, .mf4), candump text on standard output for --out -. The
+truth CSV has the estimate CSV's columns (t, vx, vy, beta, yaw_rate; SI units,
+rad) plus ax, ay, delta, and per wheel fx_, fy_, fz_, mu_, alpha_, kappa_, w_
+(wheel speed, rad/s), torque_ (fl, fr, rl, rr). Both are written to a
+temporary file and renamed when complete; an existing
 file is replaced, an input (config, DBC) never."""
 
 
@@ -53,7 +56,7 @@ def register(subparsers) -> None:
                    help="probability per sample of a heavy-tailed (Student-t) outlier (default 0)")
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     p.add_argument("--start-time", type=float, default=0.0, help="timestamp of the first frame in s (default 0)")
-    p.add_argument("--out", "-o", required=True, help="CAN log to write")
+    p.add_argument("--out", "-o", required=True, help="CAN log to write (- for candump text on standard output)")
     p.add_argument("--truth", required=True, help="truth CSV to write")
     p.set_defaults(func=run)
 
@@ -92,6 +95,8 @@ def run(args) -> int:
         raise UsageError(f"--speed: a target speed from {MIN_SPEED_KMH:g} to {MAX_SPEED_KMH:g} km/h, got {args.speed}")
     if args.duration is not None and not (math.isfinite(args.duration) and args.duration > 0):
         raise UsageError(f"--duration: seconds above 0, got {args.duration}")
+    if is_stdio(args.truth):
+        raise UsageError("--truth -: the truth CSV goes to a file; only --out may be - (standard output)")
     check_outputs({"--out": args.out, "--truth": args.truth},
                   {"the config": args.config or DEFAULT_CONFIG, "the input DBC": config.input_dbc,
                    "the output DBC": config.output_dbc})
@@ -105,9 +110,9 @@ def run(args) -> int:
                               amplitude_deg=args.amplitude, seed=args.seed, noise_scale=args.noise_scale,
                               outliers=args.outliers, start_time=args.start_time, channel=config.input_bus.channel,
                               progress=lambda f: bar.update(round(100 * f) - bar.n), mu_jump=mu_jump)
-        for output, write in zip(outputs, (result.write_log, result.write_truth)):
+        for output, write in zip(outputs, (write_log, write_truth)):
             try:
-                write(output.write_path)
+                write(result, output)
             except OSError as exc:
                 raise output.error(exc) from None
         for output in outputs:
@@ -116,5 +121,17 @@ def run(args) -> int:
         for output in outputs:
             output.discard()
     duration = result.truth["t"][-1] - result.truth["t"][0]
-    print(f"wrote {len(result.frames)} frames ({duration:.1f} s) to {args.out} and truth to {args.truth}")
+    report = sys.stderr if is_stdio(args.out) or is_stdio(args.truth) else sys.stdout
+    print(f"wrote {len(result.frames)} frames ({duration:.1f} s) to {args.out} and truth to {args.truth}", file=report)
     return 0
+
+
+def write_log(result, output: OutputFile) -> None:
+    """The drive's frames into ``output`` (by suffix, or candump text on standard output)."""
+    with open_frame_writer(output) as writer:
+        for frame in result.frames:
+            writer.on_message_received(frame)
+
+
+def write_truth(result, output: OutputFile) -> None:
+    result.write_truth(output.write_path)

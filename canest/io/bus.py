@@ -32,11 +32,33 @@ def _error_code(exc: Exception):
     return getattr(exc, "error_code", None) or getattr(exc, "errno", None)
 
 
+NO_SOCKETCAN = ("this machine has no SocketCAN; use vcan in a Linux guest (tools/vcan-guest), -i udp_multicast for "
+                "separate processes on this machine (e.g. -c 239.74.163.2), or -i virtual within one process "
+                "(canest demo)")
+
+
+def python_can_config() -> dict:
+    """python-can's own bus configuration, in python-can's order (``can.util.load_config``: the config files
+    ``~/.canrc`` and others, overridden by ``CAN_INTERFACE``, ``CAN_CHANNEL``, ``CAN_BITRATE``, ``CAN_CONFIG``);
+    only the keys they set."""
+    try:
+        found = can.util.load_config()
+    except can.exceptions.CanInterfaceNotImplementedError as exc:
+        if '"None"' not in str(exc):
+            raise BusOpenError(f"python-can's configuration (~/.canrc or CAN_INTERFACE): {exc}; "
+                               f"choose one of {', '.join(sorted(can.VALID_INTERFACES))}") from None
+        found = {k: v for k, v in can.util.load_config(config={"interface": "virtual"}).items() if k != "interface"}
+    return {k: v for k, v in found.items() if v is not None}
+
+
 def open_bus(kwargs: dict, role: str, **extra) -> can.BusABC:
+    where = f"{kwargs.get('interface')}:{kwargs.get('channel')}"
     try:
         return can.Bus(**kwargs, **extra)
     except (can.CanError, OSError, ValueError, ImportError) as exc:
-        raise BusOpenError(f"cannot open {role} bus {kwargs.get('interface')}:{kwargs.get('channel')}: {exc}") from None
+        if _error_code(exc) == errno.EAFNOSUPPORT and kwargs.get("interface") == "socketcan":
+            raise BusOpenError(f"cannot open {role} bus {where}: {exc}: {NO_SOCKETCAN}") from None
+        raise BusOpenError(f"cannot open {role} bus {where}: {exc}") from None
 
 
 class BusLink:

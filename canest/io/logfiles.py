@@ -2,7 +2,9 @@
 
 ``.log`` (candump), ``.asc``, ``.trc``, ``.csv`` (each also ``.gz``-compressed),
 ``.blf``, and whatever else python-can reads (``.db``, ``.mf4``, plug-ins).
-:func:`open_log` gives a :class:`LogSource`: iterate it for the frames. What
+``-`` is standard input, read as it arrives (a pipe from ``candump -L``), in
+one of the formats python-can reads from a stream (:data:`STREAM_FORMATS`,
+candump text by default). :func:`open_log` gives a :class:`LogSource`: iterate it for the frames. What
 cannot be read does not end the replay: a text line python-can cannot parse is
 skipped and counted (:mod:`canest.io.textlogs`), a truncated or corrupt binary
 log ends where it can no longer be decoded (:mod:`canest.io.blflogs`), and
@@ -16,15 +18,20 @@ from __future__ import annotations
 
 import gzip
 import logging
+import sys
 import threading
 from pathlib import Path
 
 import can
 
-from canest.errors import CanestError, DependencyError, FileIOError, InputFileError, LogError
+from canest.errors import CanestError, DependencyError, FileIOError, InputFileError, LogError, UsageError
 from canest.io.blflogs import blf_frames
 from canest.io.damage import LogDamage
+from canest.io.outputs import is_stdio
 from canest.io.textlogs import TEXT_READERS, text_frames
+
+
+STREAM_FORMATS = (*(kind.lstrip(".") for kind in TEXT_READERS), "blf")  # readable from standard input
 
 
 def log_format(path: Path):
@@ -49,33 +56,56 @@ class ReaderWarnings(logging.Handler):
 
 
 class LogSource:
-    """A log's frames (iterate once), ``damage`` (what could not be read), ``position()`` (bytes read, for progress)."""
+    """A log's frames (iterate once), ``damage`` (what could not be read), ``position()`` (bytes read, for progress).
 
-    def __init__(self, path):
-        self.path = Path(path)
+    ``path`` ``-`` is standard input; ``kind`` (``log``, ``asc``, ``trc``, ``csv``, ``blf``) names the format where
+    the suffix does not (standard input: candump ``log`` by default).
+    """
+
+    def __init__(self, path, kind: str | None = None):
+        self.stdin = is_stdio(path)
+        self.path = Path("<stdin>" if self.stdin else path)
         self.damage = LogDamage(self.path)
         self.frames = 0
+        if self.stdin:
+            kind, compressed = f".{kind or 'log'}", False
+            if kind.lstrip(".") not in STREAM_FORMATS:
+                raise UsageError(f"--format {kind.lstrip('.')}: standard input can be read as "
+                                 f"{', '.join(STREAM_FORMATS)}; write other formats to a file first")
+            self.handle = sys.stdin.buffer
+            stream = self.handle
+        else:
+            stream, kind, compressed = self._open_file(kind)
+        if kind in TEXT_READERS:
+            self.reader = None
+            self._frames = text_frames(self.path, kind, stream, self.damage)
+        elif kind == ".blf":
+            self.reader = None
+            size = None if compressed or self.stdin else self.path.stat().st_size
+            self._frames = blf_frames(self.path, stream, size, self.damage)
+        else:
+            self.handle.close()
+            self.reader = python_can_reader(self.path)
+            self._frames = until_unreadable(self.reader, self.damage)
+
+    def _open_file(self, kind):
+        """(the stream, its format's suffix, whether gzip-compressed) of a log file; ``kind`` overrides the suffix."""
         if self.path.is_dir():
             raise InputFileError(f"{self.path}: that is a folder; name a log file")
         if not self.path.exists():
             raise InputFileError(f"{self.path}: log file not found")
-        kind, compressed = log_format(self.path)
+        suffix, compressed = log_format(self.path)
         try:
             self.handle = open(self.path, "rb")
             stream = gzip.GzipFile(fileobj=self.handle) if compressed else self.handle
         except OSError as exc:
             raise InputFileError(f"{self.path}: cannot read: {exc.strerror}; check that the file may be read "
                                  "by this user") from None
-        if kind in TEXT_READERS:
-            self.reader = None
-            self._frames = text_frames(self.path, kind, stream, self.damage)
-        elif kind == ".blf":
-            self.reader = None
-            self._frames = blf_frames(self.path, stream, None if compressed else self.path.stat().st_size, self.damage)
-        else:
-            self.handle.close()
-            self.reader = python_can_reader(self.path)
-            self._frames = until_unreadable(self.reader, self.damage)
+        return stream, (f".{kind}" if kind else suffix), compressed
+
+    def size(self):
+        """Bytes of the log file (None for standard input or a file python-can reads itself)."""
+        return None if self.stdin or self.reader is not None else self.path.stat().st_size
 
     def __iter__(self):
         warnings = ReaderWarnings(self.damage)
@@ -93,8 +123,8 @@ class LogSource:
             raise LogError(f"{self.path}: no frame could be read: {self.damage.descriptions()[0]}")
 
     def position(self) -> int:
-        """Bytes of the file read so far (0 where python-can reads the file itself)."""
-        return 0 if self.handle.closed else self.handle.tell()
+        """Bytes of the file read so far (0 where python-can reads the file itself or for standard input)."""
+        return 0 if self.stdin or self.handle.closed else self.handle.tell()
 
     def warnings(self) -> list:
         """One line per cause of what could not be read, and a line for a log without frames."""
@@ -104,7 +134,8 @@ class LogSource:
     def stop(self) -> None:
         if self.reader is not None:
             self.reader.stop()
-        self.handle.close()
+        if not self.stdin:
+            self.handle.close()
 
 
 def python_can_reader(path: Path):
@@ -112,7 +143,7 @@ def python_can_reader(path: Path):
     try:
         return can.LogReader(str(path))
     except (ImportError, NotImplementedError) as exc:  # the MF4 reader without asammdf
-        raise DependencyError(f"{path}: {exc}") from None
+        raise DependencyError(f"{path}: {exc}; pip install 'canest[mf4]'") from None
     except ValueError as exc:
         raise LogError(f"{path}: {exc}; canest reads .log (candump), .asc, .blf, .trc, .csv (also .gz), .db, .mf4") \
             from None
@@ -135,5 +166,5 @@ def until_unreadable(reader, damage: LogDamage):
         damage.stop("corrupt", 0, f"corrupt: reading stopped after {frames} frames ({type(exc).__name__}: {exc})")
 
 
-def open_log(path) -> LogSource:
-    return LogSource(path)
+def open_log(path, kind: str | None = None) -> LogSource:
+    return LogSource(path, kind)

@@ -14,7 +14,8 @@ file of that name is replaced, as python-can's writers, ``cp`` and ``gcc -o``
 do: the inputs are protected by :func:`check_outputs`, and the old file stays
 intact until the new one is complete. A symbolic link is written through (the
 file it points to is replaced); a device or pipe (``/dev/null``, a FIFO) is
-written directly. Every ``OSError`` becomes one line naming the file and the
+written directly. ``-`` names standard output: written directly, never staged,
+and only one output of a run may take it. Every ``OSError`` becomes one line naming the file and the
 remedy: :class:`~canest.errors.OutputFileError` (exit 73) when the file cannot
 be created, :class:`~canest.errors.FileIOError` (exit 74) when writing fails.
 """
@@ -24,6 +25,7 @@ import errno
 import os
 import secrets
 import stat
+import sys
 from pathlib import Path
 
 from canest.errors import FileIOError, OutputFileError, UsageError
@@ -43,6 +45,20 @@ WRITE_FAILED = {
     errno.EDQUOT: "the disk quota is used up; free space or write elsewhere",
     errno.EFBIG: "the file exceeds the size limit (file system or `ulimit -f`); write elsewhere",
 }
+
+
+STDIO = "-"  # as a log: standard input; as an output: standard output
+
+
+def is_stdio(path) -> bool:
+    """Whether ``path`` is ``-``: standard input as a log, standard output as an output."""
+    return path is not None and str(path) == STDIO
+
+
+def open_stdout():
+    """Standard output as a text file of its own (closing it leaves fd 1 open), line-buffered for pipes."""
+    sys.stdout.flush()
+    return open(sys.stdout.fileno(), "w", newline="", buffering=1, closefd=False)
 
 
 def _identity(path):
@@ -66,12 +82,16 @@ def _how_same(output, other) -> str:
 
 def check_outputs(outputs: dict, inputs: dict) -> None:
     """Refuse an output that is an input or another output; ``{option or role: path or None}`` each."""
+    to_stdout = [option for option, path in outputs.items() if is_stdio(path)]
+    if len(to_stdout) > 1:
+        raise UsageError(f"{' and '.join(to_stdout)} all name - (standard output); only one output can go there: "
+                         "name files for the others")
     taken = {}
     for role, path in inputs.items():
         if path is not None and _identity(path) is not None:
             taken.setdefault(_identity(path), (role, path))
     for option, path in outputs.items():
-        if path is None:
+        if path is None or is_stdio(path):
             continue
         key = _identity(path)
         if key is None:
@@ -88,6 +108,10 @@ class OutputFile:
 
     def __init__(self, path, staged: bool = True):
         self.path = Path(path)
+        self.stdout = is_stdio(path)
+        if self.stdout:
+            self.target, self.temp, self.write_path = self.path, None, None
+            return
         self.target = Path(os.path.realpath(path))
         if self.target.is_dir():
             raise OutputFileError(f"{self.path}: cannot create: that is a folder; name a file in it")
@@ -108,9 +132,15 @@ class OutputFile:
             except OSError as exc:
                 raise self.error(exc) from None
 
+    def open_text(self):
+        """The output as a text file (for ``csv``: no newline translation); standard output for ``-``."""
+        return open_stdout() if self.stdout else open(self.write_path, "w", newline="")
+
     def error(self, exc: OSError):
         """The one-line error for an ``OSError`` while creating or writing this output."""
         reason = exc.strerror or str(exc)
+        if self.stdout:
+            return FileIOError(f"standard output: cannot write: {reason}; check where it is redirected")
         if exc.errno in CANNOT_CREATE:
             return OutputFileError(f"{self.path}: cannot create: {reason}; {CANNOT_CREATE[exc.errno]}")
         remedy = WRITE_FAILED.get(exc.errno, "check the disk and the device, or write elsewhere")

@@ -8,7 +8,8 @@ their sinks:
 
 - :class:`CsvSink`: one row per tick (every tick);
 - :class:`LogSink`: the estimate frames of every tick into a CAN log, its
-  format chosen by python-can from the suffix (``can.Logger``);
+  format chosen by python-can from the suffix (``can.Logger``), candump text
+  on standard output for ``-`` (:func:`open_frame_writer`);
 - :class:`BusSink`: the newest tick's frames onto a bus link, never a burst
   (older ticks of the same pass are counted ``superseded``);
 - :class:`CallbackSink`: a function called with every estimate.
@@ -25,6 +26,8 @@ Frame sinks take an encoder (anything with ``encode(estimate) -> [can.Message]``
 from __future__ import annotations
 
 import csv
+import math
+from datetime import datetime, timezone
 
 import can
 
@@ -106,7 +109,7 @@ class CsvSink(FileSink):
     def __init__(self, path, states=(), staged: bool = False):
         super().__init__(path, staged)
         try:
-            self.handle = open(self.output.write_path, "w", newline="")
+            self.handle = self.output.open_text()
             self.writer = csv.writer(self.handle)
             self.columns = None
             if states:
@@ -135,17 +138,7 @@ class LogSink(FileSink):
     def __init__(self, path, encoder, staged: bool = False):
         super().__init__(path, staged)
         self.encoder = encoder
-        try:
-            self.logger = can.Logger(str(self.output.write_path))
-        except (ImportError, NotImplementedError) as exc:  # python-can's MF4 writer without asammdf
-            self.output.discard()
-            raise DependencyError(f"{path}: {exc}") from None
-        except ValueError as exc:
-            self.output.discard()
-            raise UsageError(f"{path}: {exc}; name a log python-can writes (.log, .asc, .blf, .trc, .csv)") from None
-        except OSError as exc:
-            self.output.discard()
-            raise self.output.error(exc) from None
+        self.logger = open_frame_writer(self.output)
 
     def _write(self, estimate) -> None:
         for frame in self.encoder.encode(estimate):
@@ -153,6 +146,50 @@ class LogSink(FileSink):
 
     def _release(self) -> None:
         self.logger.stop()
+
+
+def exact_mf4_writer(path):
+    """python-can's MF4 writer, its start time the first frame's second instead of the wall clock.
+
+    MF4 stores each timestamp relative to the file's start time. python-can's
+    writer takes the start from the clock when it opens, so a log whose clock
+    starts at 0 (a simulation) comes back 1e-7 s off; from a whole second at or
+    before the first frame every timestamp is written and read back exactly.
+    """
+    from can.io.mf4 import MF4Writer
+
+    class ExactMF4Writer(MF4Writer):
+        started = False
+
+        def on_message_received(self, msg: can.Message) -> None:
+            if not self.started and msg.timestamp is not None and math.isfinite(msg.timestamp):
+                start = float(math.floor(msg.timestamp))
+                self._mdf.header.start_time = datetime.fromtimestamp(start, timezone.utc)
+                self.last_timestamp = self._start_time = start
+            self.started = True
+            super().on_message_received(msg)
+
+    return ExactMF4Writer(path)
+
+
+def open_frame_writer(output: OutputFile):
+    """python-can's writer for ``output`` (a ``can.Listener``): by suffix, or candump ``-L`` text on stdout."""
+    try:
+        if output.stdout:
+            return can.CanutilsLogWriter(output.open_text())
+        if output.path.suffix.lower() == ".mf4":
+            return exact_mf4_writer(str(output.write_path))
+        return can.Logger(str(output.write_path))
+    except (ImportError, NotImplementedError) as exc:  # python-can's MF4 writer without asammdf
+        output.discard()
+        raise DependencyError(f"{output.path}: {exc}; pip install 'canest[mf4]'") from None
+    except ValueError as exc:
+        output.discard()
+        raise UsageError(f"{output.path}: {exc}; name a log python-can writes (.log, .asc, .blf, .trc, .csv, "
+                         ".mf4), or - for candump text on standard output") from None
+    except OSError as exc:
+        output.discard()
+        raise output.error(exc) from None
 
 
 class BusSink(Sink):

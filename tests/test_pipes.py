@@ -1,0 +1,161 @@
+"""canest in pipes, as can-utils and cantools are used: `-` is standard input as a log and standard output as an
+output, and machine-readable output (--json) for what a script reads. Real `python -m canest` processes throughout.
+"""
+import json
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+from tests.conftest import CONFIG, ROOT
+
+CANEST = [sys.executable, "-m", "canest"]
+
+
+def canest(*args, stdin=None, text=True):
+    return subprocess.run([*CANEST, *map(str, args)], capture_output=True, text=text, timeout=300, cwd=ROOT,
+                          stdin=stdin)
+
+
+def spawn(*args, stdin=None):
+    return subprocess.Popen([*CANEST, *map(str, args)], stdin=stdin, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            cwd=ROOT)
+
+
+@pytest.fixture(scope="module")
+def files(tmp_path_factory):
+    """The file-based run: simulate to a log, replay it to a CSV, evaluate it as JSON."""
+    folder = tmp_path_factory.mktemp("files")
+    log, truth, est = folder / "drive.log", folder / "truth.csv", folder / "est.csv"
+    assert canest("simulate", "--maneuver", "sine", "--duration", "6", "--out", log, "--truth", truth).returncode == 0
+    replayed = canest("replay", log, "--config", CONFIG, "--csv", est, "-q", "--json")
+    assert replayed.returncode == 0, replayed.stderr
+    result = canest("evaluate", est, truth, "--json")
+    assert result.returncode == 0, result.stderr
+    return {"log": log, "truth": truth, "est": est, "scores": json.loads(result.stdout),
+            "summary": json.loads(replayed.stdout)}
+
+
+def test_simulate_replay_evaluate_through_pipes_gives_the_file_based_numbers(files, tmp_path):
+    truth = tmp_path / "truth.csv"
+    simulate = spawn("simulate", "--maneuver", "sine", "--duration", "6", "--out", "-", "--truth", truth)
+    replay = spawn("replay", "-", "--config", CONFIG, "--csv", "-", stdin=simulate.stdout)
+    evaluate = spawn("evaluate", "-", truth, "--json", stdin=replay.stdout)
+    simulate.stdout.close()
+    replay.stdout.close()
+    out, err = evaluate.communicate(timeout=300)
+    assert [simulate.wait(60), replay.wait(60), evaluate.returncode] == [0, 0, 0], err
+    assert json.loads(out) == files["scores"]
+    assert json.loads(out)["yaw_rate"]["samples"] > 400
+    # the messages stay on stderr, and a pipe gets no progress bar
+    assert simulate.stderr.read().decode().startswith("wrote ")
+    frames = files["summary"]["frames"]
+    assert replay.stderr.read().decode().splitlines() == [f"frames={frames} decoded={frames}"]
+    assert truth.read_bytes() == files["truth"].read_bytes()
+
+
+def test_replay_outputs_on_stdout_equal_the_files(files, tmp_path):
+    est_log = tmp_path / "est.log"
+    assert canest("replay", files["log"], "--config", CONFIG, "--out", est_log, "-q").returncode == 0
+    to_stdout = canest("replay", files["log"], "--config", CONFIG, "--out", "-")
+    assert to_stdout.returncode == 0
+    assert to_stdout.stdout == est_log.read_text()  # candump text, the summary on stderr
+    assert to_stdout.stderr.startswith("frames=")
+    with open(files["log"]) as log:
+        csv_out = canest("replay", "-", "--config", CONFIG, "--csv", "-", stdin=log, text=False)
+    assert csv_out.stdout == files["est"].read_bytes()
+
+
+def test_replay_of_a_live_pipe_writes_ticks_before_the_input_ends(files):
+    """Standard input is read as it arrives: rows come out while the writer still holds the pipe open."""
+    lines = files["log"].read_bytes().splitlines(keepends=True)
+    replay = spawn("replay", "-", "--config", CONFIG, "--csv", "-", stdin=subprocess.PIPE)
+    replay.stdin.write(b"".join(lines[:1500]))
+    replay.stdin.flush()
+    header = replay.stdout.readline()
+    first_row = replay.stdout.readline()
+    assert header.startswith(b"t,vx,") and first_row[:1].isdigit()
+    assert replay.poll() is None  # still waiting for more input
+    replay.stdin.write(b"".join(lines[1500:]))
+    replay.stdin.close()
+    rest = replay.stdout.read()
+    assert replay.wait(60) == 0
+    assert header + first_row + rest == files["est"].read_bytes()
+
+
+def test_replay_reads_other_formats_from_stdin_with_format(files, tmp_path):
+    asc = tmp_path / "drive.asc"
+    assert canest("simulate", "--maneuver", "sine", "--duration", "6", "--out", asc, "--truth",
+                  tmp_path / "t.csv").returncode == 0
+    with open(asc) as log:
+        result = canest("replay", "-", "--format", "asc", "--config", CONFIG, "--json", stdin=log)
+    assert result.returncode == 0, result.stderr
+    assert json.loads(result.stdout)["decoded"] == files["summary"]["decoded"]
+
+
+def test_two_outputs_on_stdout_are_refused(files):
+    result = canest("replay", files["log"], "--out", "-", "--csv", "-")
+    assert result.returncode == 2
+    assert result.stderr.splitlines() == ["canest: error: --out and --csv all name - (standard output); only one "
+                                          "output can go there: name files for the others"]
+
+
+def test_replay_summary_as_json_says_what_the_text_says(files):
+    text = canest("replay", files["log"], "--config", CONFIG).stdout.strip()
+    summary = files["summary"]
+    assert summary["frames"] == summary["decoded"] == files["log"].read_text().count("\n")
+    assert text == " ".join([f"frames={summary['frames']}", *(f"{k}={v}" for k, v in sorted(summary.items())
+                                                               if k != "frames" and v)])
+
+
+def shifted(source, target, seconds):
+    """The estimate CSV with ``seconds`` added to every time (a live CSV's epoch clock)."""
+    rows = source.read_text().splitlines()
+    out = [rows[0]] + [f"{float(r.split(',', 1)[0]) + seconds:.6f},{r.split(',', 1)[1]}" for r in rows[1:]]
+    target.write_text("\n".join(out) + "\n")
+
+
+def test_evaluate_of_a_csv_on_another_clock_fails_and_align_puts_it_right(files, tmp_path):
+    epoch = 1_712_345_678.0
+    live = tmp_path / "live.csv"
+    shifted(files["est"], live, epoch)
+    unaligned = canest("evaluate", live, files["truth"], "--json")
+    assert unaligned.returncode == 65
+    assert unaligned.stderr.startswith(f"canest: error: {live}: no tick could be scored against")
+    assert "--align first" in unaligned.stderr and len(unaligned.stderr.splitlines()) == 1
+    by_offset = json.loads(canest("evaluate", live, files["truth"], "--json", "--align", "offset", epoch).stdout)
+    for state, score in files["scores"].items():
+        numbers = {key: value for key, value in score.items() if key != "unit"}
+        assert {key: by_offset[state][key] for key in numbers} == pytest.approx(numbers, rel=1e-6, abs=1e-9), state
+    first = canest("evaluate", live, files["truth"], "--json", "--align", "first")
+    assert first.returncode == 0
+    assert json.loads(first.stdout)["vx"]["samples"] > 400
+
+
+def test_evaluate_align_needs_a_mode(files):
+    result = canest("evaluate", files["est"], files["truth"], "--align", "offset", "soon")
+    assert result.returncode == 2
+    assert "--align offset soon: expected first, none or offset SECONDS" in result.stderr
+
+
+def test_evaluate_json_has_the_documented_keys(files):
+    keys = {"unit", "rmse", "mae", "max_error", "samples", "valid", "cov1", "cov2", "cov3", "nees", "vbw",
+            "wrong_sign"}
+    assert set(files["scores"]) == {"vx", "vy", "beta", "yaw_rate"}
+    assert all(set(score) == keys for score in files["scores"].values())
+    assert np.isfinite(files["scores"]["beta"]["rmse"])
+
+
+def test_replay_speed_is_renamed_rate(files):
+    old = canest("replay", files["log"], "--speed", "2")
+    assert old.returncode == 2
+    assert "--speed is the playback speed of --realtime" in old.stderr
+    new = canest("replay", files["log"], "--rate", "0", "--realtime", "-i", "virtual")
+    assert new.returncode == 2 and "--rate: a playback speed factor above 0" in new.stderr
+    start = time.monotonic()
+    played = canest("replay", files["log"], "--realtime", "--speed", "50", "-i", "virtual")
+    assert played.returncode == 0 and time.monotonic() - start < 30
+    assert "canest: warning: replay --speed is deprecated (simulate's --speed is km/h); type --rate 50 now" \
+        in played.stderr
