@@ -11,13 +11,6 @@ import can
 from tests.conftest import CONFIG
 
 
-def summary_value(stderr, key):
-    """``key`` in the frame summary the daemon printed when it stopped (0 if absent)."""
-    last = [line for line in stderr.splitlines() if line.startswith("frames=")][-1]
-    fields = dict(part.split("=") for part in last.split())
-    return int(fields.get(key, 0))
-
-
 class Daemon:
     """``canest run`` as a subprocess (vcan0 -> vcan1 unless the config says otherwise)."""
 
@@ -58,28 +51,6 @@ class Daemon:
         code = self.process.wait(timeout=30)
         self.reader.join(timeout=5)
         return code
-
-    def counts(self) -> dict:
-        """The daemon's frame summary now: asks for a status line (SIGUSR1) and reads it."""
-        before = self.stderr.count("status: frames=")
-        self.signal(signal.SIGUSR1)
-        assert self.wait_for("status: frames=", count=before + 1, timeout=30.0), self.stderr
-        line = [line for line in self.lines if "status: frames=" in line][-1]
-        fields = line.split("status: ", 1)[1].split(" | ")[0].split()
-        return {key: int(value) for key, value in (field.split("=") for field in fields)}
-
-    def wait_until_counted(self, key, at_least, timeout=120.0) -> dict:
-        """Wait until the daemon has read what was sent: ``key`` in its summary reaches ``at_least``.
-
-        The guest's CPU may be shared with a busy host: frames wait in the socket's receive buffer
-        until the daemon gets to them, which takes as long as it takes. Returns the last summary,
-        whether or not it got there (the caller asserts on it)."""
-        deadline = time.monotonic() + timeout
-        while True:
-            counts = self.counts()
-            if counts.get(key, 0) >= at_least or time.monotonic() > deadline:
-                return counts
-            time.sleep(0.2)
 
     def wait_for(self, text, timeout=10.0, count=1) -> bool:
         """Wait until ``text`` has appeared ``count`` times in the daemon's log."""
@@ -153,43 +124,11 @@ class Player(threading.Thread):
         self.join(timeout=10)
 
 
-END_MARK_ID = 0x7FF  # in neither DBC: the daemon's kernel filter keeps it out of its input
-
-
-def mark_end(channel):
-    """Send one END_MARK_ID frame on ``channel``: a capture that has read it has read everything before it."""
-    with can.Bus(interface="socketcan", channel=channel) as bus:
-        bus.send(can.Message(arbitration_id=END_MARK_ID, data=b"", is_extended_id=False))
-
-
-class Candump:
-    """can-utils' candump logging ``channel`` to ``path``, line-buffered, until :meth:`finish`."""
-
-    def __init__(self, channel, path):
-        self.channel, self.path = channel, path
-        self.process = subprocess.Popen(["stdbuf", "-oL", "candump", "-L", channel], stdout=open(path, "w"))
-
-    def finish(self, timeout=120.0):
-        """Read up to an end mark (however long a busy guest takes), stop, return the frames before it."""
-        mark_end(self.channel)
-        deadline = time.monotonic() + timeout
-        marked = f" {END_MARK_ID:03X}#"
-        while marked not in self.path.read_text() and time.monotonic() < deadline:
-            time.sleep(0.1)
-        self.process.send_signal(signal.SIGINT)
-        self.process.wait(timeout=10)
-        assert marked in self.path.read_text(), f"candump on {self.channel} did not read up to the end mark"
-        lines = self.path.read_text().splitlines(keepends=True)
-        self.path.write_text("".join(lines[:next(i for i, line in enumerate(lines) if marked in line)]))
-        return list(can.LogReader(str(self.path)))
-
-
 class Capture(threading.Thread):
     """Every frame on vcan1, with its receive time."""
 
     def __init__(self, channel="vcan1"):
         super().__init__(daemon=True)
-        self.channel = channel
         self.bus = can.Bus(interface="socketcan", channel=channel)
         self.frames = []
         self.done = threading.Event()
@@ -210,17 +149,6 @@ class Capture(threading.Thread):
         self.join(timeout=5)
         self.bus.shutdown()
         return self.frames
-
-    def drain(self, timeout=120.0):
-        """Read up to an end mark (however long a busy guest takes), stop, return the frames before it."""
-        mark_end(self.channel)
-        deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline and not any(m.arbitration_id == END_MARK_ID for m in self.frames):
-            time.sleep(0.1)
-        frames = self.stop()
-        marks = [i for i, m in enumerate(frames) if m.arbitration_id == END_MARK_ID]
-        assert marks, f"the capture on {self.channel} did not read up to the end mark"
-        return frames[:marks[0]]
 
 
 def ip(*args):

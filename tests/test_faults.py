@@ -21,7 +21,7 @@ from canest.apps.evaluate import read_table
 from canest.apps.replay import replay
 from canest.signals import INPUT_GROUPS
 from tests.conftest import ROOT
-from tests.live import Capture, Daemon, Player, ip, restore_vcan, summary_value
+from tests.live import Capture, Daemon, Player, ip, restore_vcan
 
 pytestmark = pytest.mark.socketcan
 DB = cantools.database.load_file(str(ROOT / "dbc" / "canest_estimates.dbc"))
@@ -34,6 +34,12 @@ BETA_VALID, YAW_VALID = 1 << 2, 1 << 3
 def statuses(frames, since=0.0, until=float("inf")):
     return [STATUS.decode(m.data, decode_choices=False) for m in frames
             if m.arbitration_id == STATUS.frame_id and since <= m.timestamp <= until]
+
+
+def summary_value(stderr, key):
+    last = [line for line in stderr.splitlines() if line.startswith("frames=")][-1]
+    fields = dict(part.split("=") for part in last.split())
+    return int(fields.get(key, 0))
 
 
 @pytest.fixture
@@ -134,14 +140,12 @@ def test_malformed_traffic_is_counted_never_fatal_and_does_not_move_the_estimate
     # is a valid frame to any receiver (the limit of an 8-bit CRC and a 4-bit counter, not a rejection to test).
     payloads = [p for p in np.random.default_rng(11).integers(0, 256, (RANDOM_FRAMES + 50, 8), dtype=np.uint8)
                 if not integrity.checksum_ok(0x130, bytes(p), 7)][:RANDOM_FRAMES]
-    paced_from = time.perf_counter()
-    for i, payload in enumerate(payloads):  # paced by the clock, not by sleeps a busy guest overruns
+    for payload in payloads:
         attacker.send(crafted(0x130, bytes(payload)))
-        time.sleep(max(0.0, paced_from + 0.005 * (i + 1) - time.perf_counter()))
+        time.sleep(0.005)
     attack_end = time.time()
     attacker.shutdown()
-    time.sleep(0.5)
-    daemon.wait_until_counted("rejected_checksum", 50 + RANDOM_FRAMES)  # a busy guest reads them late, not never
+    time.sleep(1.5)
     assert daemon.alive()
     assert daemon.terminate() == 0
     for cause in ("rejected_dlc", "rejected_remote_frame", "rejected_fd_mismatch"):
@@ -180,8 +184,6 @@ def test_output_interface_down_drops_frames_without_blocking_and_recovers(sessio
 
 
 def test_ten_times_nominal_traffic_for_ten_seconds(session, tmp_path):
-    """No crash, memory flat, and normal estimates again once the burst is read. The latency after the
-    burst is printed, not asserted: it is how fast this machine is (``tools/bench/live.py`` measures it)."""
     daemon, player, capture = session(speed=10.0)
     time.sleep(1.0)
     rss_start = daemon.rss_kib()
@@ -189,27 +191,22 @@ def test_ten_times_nominal_traffic_for_ten_seconds(session, tmp_path):
     player.stop()
     assert daemon.alive()
     rss_burst = daemon.rss_kib()
-    read = daemon.counts()["frames"]
-    while (now := daemon.counts()["frames"]) != read:  # the receive queue drains, however long that takes
-        read = now
-        time.sleep(1.0)
     normal = Player(player.frames, speed=1.0)
     normal.start()
-    time.sleep(3.0)
+    time.sleep(3.0)  # the kernel's receive queue drains
     daemon.signal(signal.SIGUSR1)  # the status line clears the latency window
     time.sleep(2.0)
     before = daemon.stderr.count("latency p50")
     daemon.signal(signal.SIGUSR1)
-    assert daemon.wait_for("latency p50", count=before + 1, timeout=30.0)
-    recovered = statuses(capture.frames, time.time() - 1.5)
+    assert daemon.wait_for("latency p50", count=before + 1)
     normal.stop()
     latency_line = [line for line in daemon.stderr.splitlines() if "latency p50" in line][-1]
+    p99 = float(latency_line.split("p99 ")[1].split(" ms")[0])
     rss_end = daemon.rss_kib()
     assert daemon.terminate() == 0
     print(f"RSS {rss_start} -> {rss_burst} -> {rss_end} KiB; after the burst: {latency_line.split('latency ')[1]}")
     assert rss_end - rss_start < 20_000, f"RSS grew from {rss_start} to {rss_end} KiB"
-    assert recovered and all(s["Mode"] == 1 and s["ValidFlags"] & YAW_VALID for s in recovered[-20:]), \
-        "normal estimates once the burst is read"
+    assert p99 < 20.0, latency_line
 
 
 def test_transmits_only_output_ids_at_most_at_their_cycle_rate_under_flood(session):

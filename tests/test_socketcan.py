@@ -3,10 +3,13 @@
 Run on a machine with vcan0/vcan1, or on any Linux host through the UML guest:
 ``tools/vcan-guest -- python -m pytest -m socketcan``.
 """
+import re
+import signal
 import subprocess
 import sys
 import time
 
+import can
 import cantools
 import numpy as np
 import pytest
@@ -16,7 +19,7 @@ from canest.apps.evaluate import read_table, score
 from canest.apps.replay import replay
 from tests import live
 from tests.conftest import CONFIG, ROOT
-from tests.live import Daemon, summary_value
+from tests.live import Daemon
 
 pytestmark = pytest.mark.socketcan
 OUTPUT_DB = cantools.database.load_file(str(ROOT / "dbc" / "canest_estimates.dbc"))
@@ -49,26 +52,16 @@ def live_accuracy(live_csv, truth_csv, first_frame_time):
     return {s.state: s.rmse for s in score(live, read_table(truth_csv), skip=0.5)}, live
 
 
-def compare_with_offline(live, received_log):
-    """The daemon's estimates are those of an offline replay of the frames it received, as it received them.
-
-    ``received_log`` is candump's capture of vcan0: the frames with the kernel's receive timestamps, which
-    are the daemon's. (Against the simulated log itself, live differs wherever a busy machine delayed the
-    player: that is the player's timing, not the daemon's.)"""
+def compare_with_offline(live, log):
     offline = []
-    replay(read_config(), received_log, progress=False, on_estimate=offline.append)
+    replay(read_config(), log, progress=False, on_estimate=offline.append)
     n = min(len(offline), len(live["t"]))
     offline_yaw = np.array([e.values["yaw_rate"] for e in offline[:n]])
-    assert np.array_equal(np.isfinite(live["yaw_rate"][:n]), np.isfinite(offline_yaw)), "initialized at another tick"
-    started = np.isfinite(offline_yaw)
+    started = np.isfinite(offline_yaw) & np.isfinite(live["yaw_rate"][:n])
     difference = live["yaw_rate"][:n][started] - offline_yaw[started]
-    print(f"live vs offline replay of the received frames: {n} ticks, yaw rate max |difference| "
-          f"{np.degrees(np.abs(difference).max()):.2e} deg/s")
-    # Equal to the CSV's digits when the guest keeps up (measured 2.8e-8 deg/s). Under a loaded host, a frame
-    # stamped before a tick may reach the socket after the idle loop ran that tick (measured 8.3e-3 deg/s):
-    # the allowance the lane always had for a frame crossing a tick boundary.
+    # Replay and live differ only where kernel timestamps move a frame across a tick boundary.
     assert np.sqrt(np.mean(difference**2)) < np.radians(0.1)
-    assert np.abs(difference).max() < np.radians(0.5)
+    assert np.max(np.abs(difference)) < np.radians(0.5)
 
 
 def read_config():
@@ -78,53 +71,46 @@ def read_config():
 
 
 class Capture:
-    """Frames on vcan0 by candump (what the daemon was given), and on vcan1 by python-can and by candump."""
+    """Frames on vcan1, by python-can and by can-utils' candump at the same time."""
 
-    def __init__(self, folder):
-        self.received = live.Candump("vcan0", folder / "received.log")
+    def __init__(self, candump_path):
         self.python_can = live.Capture("vcan1")
-        self.candump = live.Candump("vcan1", folder / "sent.log")
+        self.candump_path = candump_path
+        self.candump = subprocess.Popen(["candump", "-L", "vcan1"], stdout=open(candump_path, "w"))
         time.sleep(0.2)
 
-    def finish_input(self):
-        return self.received.finish()
-
-    def finish_output(self):
-        return self.python_can.drain(), self.candump.finish()
+    def finish(self):
+        time.sleep(0.3)
+        frames = self.python_can.stop()
+        self.candump.send_signal(signal.SIGINT)
+        self.candump.wait(timeout=10)
+        return frames, list(can.LogReader(str(self.candump_path)))
 
 
 def run_end_to_end(tmp_path, dlc_run, play_command):
     log, truth_csv, sim = dlc_run
-    capture = Capture(tmp_path)
+    capture = Capture(tmp_path / "candump.log")
     daemon = Daemon(tmp_path / "live.csv")
     try:
-        subprocess.run(play_command(log), check=True, timeout=600, capture_output=True)
-        received = capture.finish_input()
-        # A frame the kernel did not deliver to candump was lost before any reader: the machine, not canest.
-        assert [(m.arbitration_id, m.data) for m in received] == [(m.arbitration_id, m.data) for m in sim.frames], \
-            f"the guest's kernel delivered {len(received)} of the {len(sim.frames)} frames played (not canest)"
-        # Every frame delivered is read and accounted by the daemon, however long a busy guest takes.
-        daemon.wait_until_counted("frames", len(received))
+        subprocess.run(play_command(log), check=True, timeout=120, capture_output=True)
+        time.sleep(0.3)
     finally:
         code = daemon.terminate()
-    by_python_can, by_candump = capture.finish_output()
+    by_python_can, by_candump = capture.finish()
     stderr = daemon.stderr
     assert code == 0, stderr
-    assert summary_value(stderr, "frames") == summary_value(stderr, "decoded") == len(sim.frames), stderr
+    assert f"frames={len(sim.frames)}" in stderr and f"decoded={len(sim.frames)}" in stderr, stderr
     yaw_py, yaw_dump = yaw_frames(by_python_can), yaw_frames(by_candump)
-    assert len(yaw_py) == len(yaw_dump) > 0
+    assert len(yaw_py) == len(yaw_dump) > 700
     assert [m.data for m in yaw_py] == [m.data for m in yaw_dump]
     check_integrity(yaw_py)
     rmse, live = live_accuracy(tmp_path / "live.csv", truth_csv, sim.frames[0].timestamp)
-    superseded = summary_value(stderr, "superseded")
-    # One set of frames per loop pass: every tick is sent or superseded by a newer one (how many are
-    # superseded depends on how often a busy machine lets the loop run, not on canest).
-    print(f"ticks {len(live['t'])}, sent {len(yaw_py)}, superseded {superseded}")
-    assert len(yaw_py) == len(live["t"]) - superseded
+    superseded = int(re.search(r"superseded=(\d+)", stderr).group(1)) if "superseded=" in stderr else 0
+    assert len(yaw_py) == len(live["t"]) - superseded and superseded < 0.05 * len(live["t"])
     sent_as = np.nan_to_num(live["yaw_rate"], nan=0.0)  # not-yet-initialized ticks go out as 0, flagged invalid
     assert_in_order([YAW_SIDESLIP.decode(m.data)["YawRate"] for m in yaw_py], sent_as, 1e-4)
     assert rmse["vx"] < 0.1 and rmse["yaw_rate"] < 0.3 and rmse["beta"] < 0.5, rmse
-    compare_with_offline(live, tmp_path / "received.log")
+    compare_with_offline(live, log)
     return rmse
 
 
