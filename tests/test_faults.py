@@ -29,6 +29,7 @@ STATUS = DB.get_message_by_name("CE_Status")
 OUTPUT_IDS = {m.frame_id for m in DB.messages}
 IMU_BIT = 1 << list(INPUT_GROUPS).index("imu")
 BETA_VALID, YAW_VALID = 1 << 2, 1 << 3
+CAUSES = DB.get_message_by_name("CE_ValidityCause")
 
 
 def statuses(frames, since=0.0, until=float("inf")):
@@ -336,9 +337,13 @@ def test_live_benchmark_smoke_run_on_vcan():
     assert last[0] == "1x" and int(last[3]) == 0
 
 
-def test_a_diverging_filter_is_reset_and_reported_in_the_status(config, tmp_path):
-    """The simulated car spins (lane change at 50 km/h on mu 0.3): the daemon resets, counts it in the
-    status message and stops calling the sideslip valid, and keeps running."""
+def test_a_spinning_car_clears_the_sideslip_bit_with_its_cause_and_resets_are_reported(config, tmp_path):
+    """The simulated car spins (lane change at 50 km/h on mu 0.3): the daemon stops calling the sideslip
+    valid and says why in CE_ValidityCause (the model left its regime, its channels disagree, or the
+    filter was reset), counts any reset in the status message exactly as in its summary, and keeps
+    running. (A reset needs the gyro or the speed channel to disagree with the filter; whether the spin
+    gets that far depends on the tick timing, which live traffic varies. tests/test_estimator.py checks
+    the reset and the sideslip against the truth offline.)"""
     from canest.sim.simulate import simulate
 
     spin = simulate(config, "dlc", 50.0, 0.3, seed=1)
@@ -351,10 +356,12 @@ def test_a_diverging_filter_is_reset_and_reported_in_the_status(config, tmp_path
     frames = capture.stop()
     assert daemon.alive() and daemon.terminate() == 0
     status = statuses(frames)
-    assert status[-1]["ResetCount"] >= 1 and summary_value(daemon.stderr, "resets") >= 1
-    after_reset = [s for s in status if s["ResetCount"] >= 1]
-    assert after_reset[0]["Mode"] == 3 and not after_reset[0]["ValidFlags"] & BETA_VALID
-    assert "filter diverged" in daemon.stderr
+    assert status[-1]["ResetCount"] == min(summary_value(daemon.stderr, "resets"), 255)
+    causes = [CAUSES.decode(m.data) for m in frames if m.arbitration_id == CAUSES.frame_id]
+    spin_causes = {"model_regime", "inconsistent", "after_reset"}
+    noticed = [c for c in causes if str(c["SideslipCause"]) in spin_causes]
+    assert noticed, "the spin was never noticed"
+    assert all(not s["ValidFlags"] & BETA_VALID for s in status[-50:]), "sideslip valid at the end of the spin"
 
 
 def test_a_wrong_config_exits_before_opening_the_bus(tmp_path):

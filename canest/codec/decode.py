@@ -159,7 +159,7 @@ class InputDecoder:
             if spec.valid and not spec.valid.accepts(values):
                 dropped["invalid_signal"] += 1
                 continue
-            if self.stuck.stuck(spec.canonical, raw, msg.timestamp, self.moving):
+            if spec.stuck_after and self.stuck.stuck(spec.canonical, raw, msg.timestamp, self.moving):
                 dropped["stuck"] += 1
                 continue
             if at_limit(spec.range, plan.signal_by_name[spec.signal].scale, raw):

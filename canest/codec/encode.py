@@ -88,6 +88,7 @@ class _Sender:
         self.counter_name, self.counter_modulus = counter.name, 2 ** counter.length
         self.crc_name, self.crc_index = checksum.name, integrity.checksum_byte(checksum)
         self.counter = 0
+        self.cycle_time = (message.cycle_time or 0) / 1000.0  # s
 
     def frame(self, values: dict, timestamp: float, channel) -> can.Message:
         values[self.counter_name] = self.counter
@@ -114,6 +115,7 @@ class EstimateEncoder:
         status = self.senders[STATUS_MESSAGE].signals
         self.filter_ids = {str(v): k for k, v in (status["FilterId"].choices or {}).items()}
         self.mode_ids = {str(v): k for k, v in status["Mode"].choices.items()}
+        self.last_causes, self.next_causes = None, -float("inf")  # CE_ValidityCause: on change, else at its cycle
 
     def encode(self, estimate: Estimate) -> list:
         frames = []
@@ -141,8 +143,11 @@ class EstimateEncoder:
             "ResetCount": min(estimate.resets, 255),
             "InnovationNis": clamp_to_signal(status.signals["InnovationNis"], estimate.nis),
         }, estimate.t, self.channel))
-        frames.append(self.senders[CAUSE_MESSAGE].frame(
-            {signal: estimate.cause_code(group) for signal, group in CAUSE_SIGNALS.items()}, estimate.t, self.channel))
+        causes = {signal: estimate.cause_code(group) for signal, group in CAUSE_SIGNALS.items()}
+        sender = self.senders[CAUSE_MESSAGE]
+        if causes != self.last_causes or estimate.t >= self.next_causes:
+            frames.append(sender.frame(dict(causes), estimate.t, self.channel))
+            self.last_causes, self.next_causes = causes, estimate.t + sender.cycle_time
         return frames
 
 

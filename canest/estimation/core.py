@@ -104,6 +104,7 @@ class Estimator:
         }
         self.latency_compensation = self.est.latency_compensation
         self.judge = StateJudge(model, config.vehicle, self.dt)
+        self.stale_before = self.stale_now = frozenset()  # inputs stale on the previous and on this tick
         self.geometry = WheelGeometry(config.vehicle)
         self.reference_speed = ReferenceSpeed(self.vehicle.wheel_radius, self.vehicle.tire.longitudinal_stiffness,
                                               self.est.measurement_noise["vx_reference"])
@@ -206,6 +207,7 @@ class Estimator:
         """One tick on the resampler's ``sample``."""
         t = sample.t
         inputs = TickInputs(sample)
+        self.stale_before, self.stale_now = self.stale_now, frozenset(n for n, stale in inputs.stale.items() if stale)
         missing = inputs.missing_groups()
         if not inputs.any_present():
             self.reset()  # nothing to estimate from: restart cleanly when inputs return, do not extrapolate
@@ -218,7 +220,7 @@ class Estimator:
         self.filter.predict(self.transitions[self.low_speed], u, self.dt, self.Q)
         lateral_ok = not self.low_speed and inputs.has("steering_wheel_angle", "ay")
         channels = self._channels(inputs, t, lateral_ok)
-        self.judge.record(channels, u, self.filter.x.copy(), self.filter.P.copy())
+        self.judge.record(channels, u, self.filter.x.copy(), self.filter.P.copy(), self.stale_before)
         diverged = self._update(channels, inputs, u, lateral_ok, t)
         if self.step_times is not None:
             self.step_times.append(time.perf_counter() - started)

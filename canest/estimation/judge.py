@@ -16,6 +16,8 @@ from canest.estimation import channels as ch
 from canest.estimation import validity
 from canest.estimation.inputs import WHEEL_SPEEDS
 
+# the input behind each derived channel (a channel not listed is fed by the input of its own name)
+SOURCES = {"vx_wheel": WHEEL_SPEEDS, "vx_reference": WHEEL_SPEEDS, "yaw_acceleration": ("yaw_rate",)}
 DIVERGENCE_NIS = 30.0  # windowed mean NIS of a directly measured state above which the filter is reset
 MEASURED_DIRECTLY = ("yaw_rate", "vx")
 
@@ -38,9 +40,18 @@ class StateJudge:
         if self.regime is not None:
             self.regime.reset()
 
-    def record(self, channels: ch.Channels, u: np.ndarray, x_prior: np.ndarray, P_prior: np.ndarray) -> None:
-        """Each usable channel's consistency with the prior under the configured noise."""
-        rows = np.flatnonzero(channels.mask)
+    def record(self, channels: ch.Channels, u: np.ndarray, x_prior: np.ndarray, P_prior: np.ndarray,
+               returning=frozenset()) -> None:
+        """Each usable channel's consistency with the prior under the configured noise.
+
+        A channel whose input comes back after a gap (``returning``: inputs stale on the previous tick)
+        starts a new window and its first innovation is not judged: it measures how far the state drifted
+        while nothing observed it, which this very update corrects."""
+        back = [i for i, name in enumerate(self.model.measurement_names) if SOURCES.get(name, (name,))[0] in returning]
+        self.consistency.restart(back)
+        mask = channels.mask.copy()
+        mask[back] = False
+        rows = np.flatnonzero(mask)
         if rows.size:
             measurement = ch.rows_measurement(self.model, rows, channels.ages, False)
             d = validity.normalized_innovations(measurement, x_prior, P_prior, u, channels.z[rows], channels.std[rows])
@@ -71,7 +82,8 @@ class StateJudge:
             "vx": self._vx_cause(inputs, ratios["vx"], vx_std),
             "beta": self._lateral_cause(inputs, ratios["beta"], **lateral),
         }
-        return {state: self.holds.apply(state, cause, t) for state, cause in causes.items()}
+        causes["beta"] = self.holds.apply("beta", causes["beta"], t)  # the measured states need no hold
+        return causes
 
     @staticmethod
     def _vx_cause(inputs, ratio: float, vx_std: float) -> str:

@@ -94,7 +94,7 @@ class FrictionEstimator(Estimator):
         derived = {}
         if inputs.has("yaw_rate") and inputs.any_fresh("yaw_rate"):
             rate = self.yaw_acceleration.update(t, [inputs.values["yaw_rate"]])[0]
-            if lateral_ok and len(self.yaw_acceleration.samples) == YAW_ACCELERATION_WINDOW:
+            if lateral_ok and self.yaw_acceleration.samples == YAW_ACCELERATION_WINDOW:
                 derived["yaw_acceleration"] = (rate, self.est.measurement_noise["yaw_acceleration"], 0.0)
         reference = self._reference_speed(inputs, t)
         if reference is not None:

@@ -54,9 +54,10 @@ only, no model; biases drift it by ~0.1 deg/s, so a short window), within
 A car sliding into a slow spin on low friction keeps small innovations while
 the model's sideslip stays near zero; the kinematic sideslip sees the slide.
 
-A state that failed a test stays invalid for ``HOLD`` s after the test last
-failed (:class:`Holds`): the innovations of a model out of its regime come
-in bursts, and a bit that flickers back between them is not a promise.
+Sideslip stays invalid for ``HOLD`` s after a test last failed
+(:class:`Holds`): the innovations of a model out of its regime come in
+bursts, and a bit that flickers back between them is not a promise. Yaw rate
+and vx need no hold: their sensors correct them at once.
 
 Why a bit is clear is published too (:data:`CAUSES`, CAN ``CE_ValidityCause``).
 """
@@ -104,6 +105,11 @@ class Consistency:
     def reset(self) -> None:
         for window in self.windows.values():
             window.clear()
+
+    def restart(self, rows) -> None:
+        """Forget the windows of channels ``rows``."""
+        for row in rows:
+            self.windows[self.names[row]].clear()
 
     def push(self, rows, d: np.ndarray) -> None:
         for row, value in zip(rows, d):

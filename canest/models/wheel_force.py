@@ -13,7 +13,6 @@ per wheel.
 """
 from __future__ import annotations
 
-from collections import deque
 from itertools import combinations
 
 import numpy as np
@@ -33,23 +32,36 @@ class WheelAcceleration:
     """
 
     def __init__(self, window: int = WINDOW):
-        self.samples = deque(maxlen=window)
+        self.window = window
         pairs = np.array(list(combinations(range(window), 2)))
         self.first, self.second = pairs[:, 0], pairs[:, 1]
+        self.times = np.zeros(window)
+        self.speeds = None
+        self.count = 0
+
+    @property
+    def samples(self) -> int:
+        """How many samples the window holds."""
+        return min(self.count, self.window)
 
     def reset(self) -> None:
-        self.samples.clear()
+        self.count = 0
 
     def update(self, t: float, wheel_speeds) -> np.ndarray:
-        """Add the speeds (rad/s) of tick ``t``; the accelerations (rad/s^2), zero until two samples exist."""
-        self.samples.append((t, np.asarray(wheel_speeds, dtype=float)))
-        if len(self.samples) < 2:
-            return np.zeros(len(wheel_speeds))
-        times = np.array([s[0] for s in self.samples])
-        speeds = np.array([s[1] for s in self.samples])
-        keep = self.second < len(self.samples)
+        """Add the speeds (rad/s) of tick ``t``; the accelerations (rad/s^2), zero until two samples exist.
+
+        The samples sit in a ring buffer: a pair's slope does not depend on which sample is older."""
+        speeds = np.asarray(wheel_speeds, dtype=float)
+        if self.speeds is None or self.speeds.shape[1] != speeds.size:
+            self.speeds = np.zeros((self.window, speeds.size))
+        slot = self.count % self.window
+        self.times[slot], self.speeds[slot] = t, speeds
+        self.count += 1
+        if self.count < 2:
+            return np.zeros(speeds.size)
+        keep = self.second < self.samples
         first, second = self.first[keep], self.second[keep]
-        slopes = (speeds[second] - speeds[first]) / (times[second] - times[first])[:, None]
+        slopes = (self.speeds[second] - self.speeds[first]) / (self.times[second] - self.times[first])[:, None]
         return np.median(slopes, axis=0)
 
 
