@@ -82,8 +82,7 @@ class StateJudge:
             "vx": self._vx_cause(inputs, ratios["vx"], vx_std),
             "beta": self._lateral_cause(inputs, ratios["beta"], **lateral),
         }
-        causes["beta"] = self.holds.apply("beta", causes["beta"], t)  # the measured states need no hold
-        return causes
+        return {state: self.holds.apply(state, cause, t) for state, cause in causes.items()}
 
     @staticmethod
     def _vx_cause(inputs, ratio: float, vx_std: float) -> str:

@@ -54,10 +54,11 @@ only, no model; biases drift it by ~0.1 deg/s, so a short window), within
 A car sliding into a slow spin on low friction keeps small innovations while
 the model's sideslip stays near zero; the kinematic sideslip sees the slide.
 
-Sideslip stays invalid for ``HOLD`` s after a test last failed
+A state stays invalid for ``HOLD`` s after a test last failed
 (:class:`Holds`): the innovations of a model out of its regime come in
-bursts, and a bit that flickers back between them is not a promise. Yaw rate
-and vx need no hold: their sensors correct them at once.
+bursts, and a bit that flickers back between them is not a promise. (An
+input returning after a gap does not fail a test: its first innovation
+measures the gap's drift, which that update corrects; see the judge.)
 
 Why a bit is clear is published too (:data:`CAUSES`, CAN ``CE_ValidityCause``).
 """
