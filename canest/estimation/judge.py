@@ -33,6 +33,7 @@ class StateJudge:
         self.kinematic = validity.KinematicCheck(dt)
         self.gyros = [n for n in validity.OBSERVED_BY["yaw_rate"] if n in model.measurement_names]  # the measured ones
         self.linear_tires = getattr(model, "linear_tires", False)
+        self.sources = [SOURCES.get(name, (name,))[0] for name in model.measurement_names]  # input behind each channel
 
     def reset(self) -> None:
         self.consistency.reset()
@@ -47,10 +48,12 @@ class StateJudge:
         A channel whose input comes back after a gap (``returning``: inputs stale on the previous tick)
         starts a new window and its first innovation is not judged: it measures how far the state drifted
         while nothing observed it, which this very update corrects."""
-        back = [i for i, name in enumerate(self.model.measurement_names) if SOURCES.get(name, (name,))[0] in returning]
-        self.consistency.restart(back)
-        mask = channels.mask.copy()
-        mask[back] = False
+        mask = channels.mask
+        if returning:
+            back = [i for i, source in enumerate(self.sources) if source in returning]
+            self.consistency.restart(back)
+            mask = mask.copy()
+            mask[back] = False
         rows = np.flatnonzero(mask)
         if rows.size:
             measurement = ch.rows_measurement(self.model, rows, channels.ages, False)
