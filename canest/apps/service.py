@@ -28,6 +28,7 @@ What the loop guarantees:
 from __future__ import annotations
 
 import logging
+import math
 import signal
 import threading
 import time
@@ -112,24 +113,34 @@ class Service:
                  self.config.output_bus.channel, self.config.estimator.filter, self.config.estimator.rate_hz)
         clock = _Schedule(self.notifier.watchdog_interval)
         try:
+            now = time.time()
             while not self.stopping.is_set():
-                msg = self.inputs.recv(self._wait())
+                msg = self.inputs.recv(self._wait(now))
                 if msg is not None:
                     estimates = self.pipeline.feed(msg)
+                    # the kernel's receive time: no clock read per frame (a non-finite one was rejected)
+                    now = msg.timestamp if math.isfinite(msg.timestamp) else time.time()
                 else:
-                    estimates = self.pipeline.advance(time.time() - TICK_MARGIN)
+                    now = time.time()
+                    estimates = self.pipeline.advance(now - TICK_MARGIN)
                 if estimates:
                     self._publish(estimates)
-                self._housekeeping(clock)
+                if estimates or msg is None:  # at most once a tick or an idle wait, not once a frame
+                    self._housekeeping(clock)
         finally:
             self._close()
             self.notifier.notify(STOPPING=1)
         return self.summary()
 
-    def _wait(self) -> float:
-        """Seconds to wait for a frame: until the next tick is due, at most one tick period."""
+    def _wait(self, now: float) -> float:
+        """Seconds to wait for a frame after ``now``: until the next tick is due, at most one tick period.
+
+        ``now`` is the receive time of the last frame while frames flow: the clock is read only after an
+        idle wait (a clock read is a system call in some virtual machines, costlier than decoding a frame).
+        While frames queue up a stale ``now`` costs nothing (the socket is not empty); when the bus falls
+        silent the first wait is at most one period."""
         period = 1.0 / self.config.estimator.rate_hz
-        due = self.pipeline.clock.next_tick + TICK_MARGIN - time.time()
+        due = self.pipeline.clock.next_tick + TICK_MARGIN - now
         return min(max(due, 0.0), period)
 
     def _housekeeping(self, clock: "_Schedule") -> None:

@@ -16,7 +16,7 @@ import can
 from canest.codec import integrity
 from canest.codec.dbc import load_database
 from canest.codec.plausibility import SlewLimit
-from canest.codec.sample_checks import MOVING_WHEEL_SPEED, StuckDetector, at_limit, outside
+from canest.codec.sample_checks import MOVING_WHEEL_SPEED, SignalBounds, StuckDetector
 from canest.errors import ConfigError
 from canest.settings import Config, MessageChecks
 from canest.signals import INPUT_GROUPS
@@ -30,6 +30,9 @@ class _MessagePlan:
         self.specs = specs
         self.checks = checks or MessageChecks()
         self.signal_by_name = {s.name: s for s in message.signals}
+        # per mapped signal, fixed at start-up: (spec, the DBC signals adding up to its value, its bounds)
+        self.signals = [(spec, spec.names, SignalBounds(spec.range, self.signal_by_name[spec.signal].scale))
+                        for spec in specs]
         self.crc_index = None
         if self.checks.checksum:
             try:
@@ -81,7 +84,7 @@ class InputDecoder:
         self.stuck = StuckDetector({s.canonical: s.stuck_after for s in config.signals.values() if s.stuck_after})
         self.wheel_speeds = {}  # canonical -> latest decoded value: whether the car moves
         self.counts = Counter()
-        self.last_saturated = set()  # canonical inputs of the last decoded frame that sat at a limit of its range
+        self.last_saturated = frozenset()  # canonical inputs of the last decoded frame that sat at a limit of its range
 
     @property
     def moving(self) -> bool:
@@ -146,15 +149,16 @@ class InputDecoder:
                 if delta > 1:
                     self.counts["counter_jumps"] += 1
         out = []
-        self.last_saturated = set()
+        saturated = []
         dropped = Counter()
-        for spec in plan.specs:
-            if any(name not in values for name in spec.names):
+        for spec, names, bounds in plan.signals:
+            try:
+                raw = float(sum(map(values.__getitem__, names)))
+            except KeyError:
                 continue  # another multiplexer page of this message
-            raw = sum(float(values[name]) for name in spec.names)
             if not math.isfinite(raw):
                 return self._reject("non_finite")
-            if outside(spec.range, raw):
+            if bounds.outside(raw):
                 return self._reject("out_of_range")
             if spec.valid and not spec.valid.accepts(values):
                 dropped["invalid_signal"] += 1
@@ -162,10 +166,12 @@ class InputDecoder:
             if spec.stuck_after and self.stuck.stuck(spec.canonical, raw, msg.timestamp, self.moving):
                 dropped["stuck"] += 1
                 continue
-            if at_limit(spec.range, plan.signal_by_name[spec.signal].scale, raw):
-                self.last_saturated.add(spec.canonical)
-                self.counts["saturated_samples"] += 1
+            if bounds.at_limit(raw):
+                saturated.append(spec.canonical)
             out.append((spec.canonical, spec.factor * raw + spec.offset))
+        self.last_saturated = frozenset(saturated)
+        if saturated:
+            self.counts["saturated_samples"] += len(saturated)
         for cause, count in dropped.items():
             self.counts[f"{cause}_samples"] += count
         if dropped and not out:

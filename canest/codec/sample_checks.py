@@ -12,19 +12,28 @@ from __future__ import annotations
 MOVING_WHEEL_SPEED = 3.0  # rad/s mean of the mapped wheels (about 1 m/s): the car moves
 
 
-def outside(bounds: tuple, value: float) -> bool:
-    """``value`` lies outside (low, high); a None bound is open."""
-    low, high = bounds
-    return (low is not None and value < low - 1e-9) or (high is not None and value > high + 1e-9)
+class SignalBounds:
+    """The range of one mapped signal's value and the limits at which it saturates, fixed at start-up."""
 
+    def __init__(self, bounds: tuple, quantum: float):
+        self.low, self.high = bounds
+        # a value within half a quantum of a non-zero limit: saturated, not measured. A sensor beyond its
+        # range sends the limit (a wheel speed above what the signal carries, an accelerometer at full
+        # scale); that is a bound, not the value. Zero is a physical value (standstill), never a saturation.
+        self.limits = tuple(limit for limit in bounds if limit is not None and limit != 0)
+        self.half_quantum = abs(quantum) / 2.0
 
-def at_limit(bounds: tuple, quantum: float, value: float) -> bool:
-    """A value within half a quantum of a non-zero limit of its range: saturated, not measured.
+    def outside(self, value: float) -> bool:
+        """``value`` lies outside (low, high); a None bound is open."""
+        return ((self.low is not None and value < self.low - 1e-9)
+                or (self.high is not None and value > self.high + 1e-9))
 
-    A sensor beyond its range sends the limit (a wheel speed above what the
-    signal carries, an accelerometer at full scale); that is a bound, not the
-    value. Zero is a physical value (standstill), never a saturation."""
-    return any(limit is not None and limit != 0 and abs(value - limit) <= abs(quantum) / 2.0 for limit in bounds)
+    def at_limit(self, value: float) -> bool:
+        """``value`` sits at a non-zero limit of the range (within half a quantum): saturated."""
+        for limit in self.limits:
+            if abs(value - limit) <= self.half_quantum:
+                return True
+        return False
 
 
 class StuckDetector:

@@ -162,13 +162,15 @@ class Estimator:
         without wheel speeds and ax. Motor torques, where mapped, tell which wheels transmit force."""
         if not inputs.has(*WHEEL_SPEEDS, "ax"):
             return None
-        speeds = np.array([inputs.values[name] for name in WHEEL_SPEEDS])
+        speeds = [inputs.values[name] for name in WHEEL_SPEEDS]
         ax, ay = inputs.current("ax"), inputs.current("ay")
-        torques = np.array([inputs.values.get(name, 0.0) for name in TORQUES])
-        usage = torques / (self.vehicle.wheel_radius * np.maximum(self.geometry.loads(ax, ay), 1.0))
+        loads = self.geometry.loads(ax, ay).tolist()
+        usage = [inputs.values.get(torque, 0.0) / (self.vehicle.wheel_radius * max(load, 1.0))
+                 for torque, load in zip(TORQUES, loads)]
         beta, vx = self.filter.x[self.beta], self.filter.x[self.vx]
+        accelerations = self.reference_wheel_acceleration.update(t, speeds).tolist()
         return self.reference_speed.update(t, ax + inputs.current("yaw_rate") * vx * math.tan(beta), speeds,
-                                           self.reference_wheel_acceleration.update(t, speeds), usage)
+                                           accelerations, usage)
 
     def _derived(self, inputs: TickInputs, t: float, lateral_ok: bool) -> dict:
         """Channels computed from the inputs this tick: name -> (value, standard deviation, age).
@@ -216,7 +218,7 @@ class Estimator:
             return self._publish(t, "initializing", missing, inputs)
         self._choose_mode()
         u = self._control(inputs, t)
-        started = time.perf_counter()
+        started = time.perf_counter() if self.step_times is not None else 0.0
         self.filter.predict(self.transitions[self.low_speed], u, self.dt, self.Q)
         lateral_ok = not self.low_speed and inputs.has("steering_wheel_angle", "ay")
         channels = self._channels(inputs, t, lateral_ok)

@@ -1,6 +1,8 @@
 """The held inputs of one tick, by canonical name (from a :class:`canest.resample.Sample`)."""
 from __future__ import annotations
 
+import numpy as np
+
 from canest.signals import INPUT_GROUPS, WHEELS
 
 WHEEL_SPEEDS = tuple(f"wheel_speed_{w}" for w in WHEELS)
@@ -11,15 +13,20 @@ class TickInputs:
 
     def __init__(self, sample):
         self.t = sample.t
-        self.values = dict(zip(sample.names, sample.values))
-        self.stale = dict(zip(sample.names, sample.stale))
-        self.fresh = dict(zip(sample.names, sample.fresh))
-        self.ages = dict(zip(sample.names, sample.ages))
-        self.at_limit = dict(zip(sample.names, sample.saturated))
+        names = sample.names
+        # Python floats and bools, not numpy scalars: every use below is scalar arithmetic
+        self.values = dict(zip(names, np.asarray(sample.values, dtype=float).tolist()))
+        self.stale = dict(zip(names, np.asarray(sample.stale, dtype=bool).tolist()))
+        self.fresh = dict(zip(names, np.asarray(sample.fresh, dtype=bool).tolist()))
+        self.ages = dict(zip(names, np.asarray(sample.ages, dtype=float).tolist()))
+        self.at_limit = dict(zip(names, np.asarray(sample.saturated, dtype=bool).tolist()))
 
     def has(self, *names) -> bool:
         """Every one of ``names`` is mapped, not stale and not saturated (a value at its DBC limit is no measurement)."""
-        return all(name in self.values and not self.stale[name] and not self.at_limit[name] for name in names)
+        for name in names:  # a loop, not all(...): this runs a dozen times a tick
+            if name not in self.values or self.stale[name] or self.at_limit[name]:
+                return False
+        return True
 
     def saturated(self, name: str) -> bool:
         """The input's latest sample sat at a limit of its DBC signal (and is not stale)."""

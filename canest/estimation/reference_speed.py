@@ -26,8 +26,6 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
-
 FREE_ROLLING_USAGE = 0.1  # |Fx| / Fz below which a tire is in its linear range
 WHEEL_ACCELERATION_TOLERANCE = 0.5  # m/s^2 between R dw/dt and the measured ax
 DRIFT = 0.1  # m/s per s of integration
@@ -51,14 +49,14 @@ class ReferenceSpeed:
 
         ``acceleration`` is ``ax + r vy`` (m/s^2); ``wheel_speeds`` (rad/s),
         ``wheel_accelerations`` (rad/s^2) and ``usage`` (``T / (R Fz)``,
-        signed) per wheel.
+        signed) per wheel, as sequences of floats (four numbers: plain Python beats numpy here).
         """
         radius = self.wheel_radius
-        usage = np.asarray(usage, dtype=float)
-        free = (np.all(np.abs(usage) < FREE_ROLLING_USAGE)
-                and np.all(np.abs(radius * np.asarray(wheel_accelerations) - acceleration) < WHEEL_ACCELERATION_TOLERANCE))
+        free = (all(abs(x) < FREE_ROLLING_USAGE for x in usage)
+                and all(abs(radius * a - acceleration) < WHEEL_ACCELERATION_TOLERANCE for a in wheel_accelerations))
         if free or self.speed is None or t - self.last_t > MAX_GAP:
-            self.speed = radius * float(np.mean(np.asarray(wheel_speeds) / (1.0 + usage / self.slip_stiffness)))
+            self.speed = radius * sum(w / (1.0 + x / self.slip_stiffness) for w, x in zip(wheel_speeds, usage)) \
+                / len(wheel_speeds)
             self.anchored_at = t
         else:
             self.speed += acceleration * (t - self.last_t)
