@@ -1,13 +1,16 @@
 """Helpers for tests against a running daemon on real vcan buses."""
+import contextlib
 import os
 import signal
 import subprocess
 import sys
 import threading
 import time
+from pathlib import Path
 
 import can
 
+from canest.io.bus import frames_of
 from tests.conftest import CONFIG
 
 
@@ -115,7 +118,7 @@ class Player(threading.Thread):
                         self.failed += 1
                         continue
                 try:
-                    bus.send(frame)
+                    frames_of(bus).send(frame)  # the daemon's own frame path: no clock read per frame
                     self.sent += 1
                 except (OSError, can.CanError):
                     self.failed += 1
@@ -131,11 +134,13 @@ class Player(threading.Thread):
 
 
 class Capture(threading.Thread):
-    """Every frame on vcan1, with its receive time."""
+    """Every frame on vcan1 (or those with an ID in ``ids``: a kernel filter), with its receive time."""
 
-    def __init__(self, channel="vcan1"):
+    def __init__(self, channel="vcan1", ids=None):
         super().__init__(daemon=True)
-        self.bus = can.Bus(interface="socketcan", channel=channel)
+        filters = None if ids is None else [{"can_id": i, "can_mask": 0x7FF, "extended": False} for i in ids]
+        self.bus = can.Bus(interface="socketcan", channel=channel, can_filters=filters)
+        self.link = frames_of(self.bus)  # the daemon's own frame path: no clock read per frame
         self.frames = []
         self.done = threading.Event()
         self.start()
@@ -143,7 +148,7 @@ class Capture(threading.Thread):
     def run(self):
         while not self.done.is_set():
             try:
-                msg = self.bus.recv(timeout=0.1)
+                msg = self.link.recv(0.1)
             except (OSError, can.CanError):
                 time.sleep(0.05)
                 continue
@@ -168,3 +173,23 @@ def restore_vcan(name):
     ip("set", name, "down")
     ip("set", name, "mtu", "72")
     ip("set", name, "up")
+
+
+@contextlib.contextmanager
+def receive_queues(size_bytes: int):
+    """Sockets opened inside get ``size_bytes`` of receive queue (``net.core.rmem_default``, as a deployment's
+    sysctl would; restored after).
+
+    The UML guest has one CPU, shared by the daemon, the player and the capture, and the host may leave it
+    unscheduled for half a second on a busy machine; the kernel's default queue (208 KiB, ~250 frames, 0.45 s of
+    the drive) then overflows. A test of the data path's completeness gives the queue the room a deployment that
+    values completeness over latency would (README "Operating canest as a service")."""
+    paths = [Path("/proc/sys/net/core/rmem_max"), Path("/proc/sys/net/core/rmem_default")]
+    before = [path.read_text() for path in paths]
+    for path in paths:
+        path.write_text(str(size_bytes))
+    try:
+        yield
+    finally:
+        for path, text in zip(paths, before):
+            path.write_text(text)

@@ -3,7 +3,6 @@
 Run on a machine with vcan0/vcan1, or on any Linux host through the UML guest:
 ``tools/vcan-guest -- python -m pytest -m socketcan``.
 """
-import re
 import signal
 import subprocess
 import sys
@@ -19,7 +18,7 @@ from canest.apps.evaluate import read_table, score
 from canest.apps.replay import replay
 from tests import live
 from tests.conftest import CONFIG, ROOT
-from tests.live import Daemon
+from tests.live import Daemon, receive_queues
 
 pytestmark = pytest.mark.socketcan
 OUTPUT_DB = cantools.database.load_file(str(ROOT / "dbc" / "canest_estimates.dbc"))
@@ -40,28 +39,39 @@ def yaw_frames(frames):
     return [m for m in frames if m.arbitration_id == YAW_SIDESLIP.frame_id]
 
 
+def summary_count(stderr, key):
+    """``key``'s count in the daemon's final summary line (status lines before it hold counts so far)."""
+    summary = [line for line in stderr.splitlines() if line.startswith("frames=")][-1]
+    return int(dict(part.split("=") for part in summary.split()).get(key, 0))
+
+
 def check_integrity(frames):
     counters = [YAW_SIDESLIP.decode(m.data)["CE_YawSideslip_Counter"] for m in frames]
     assert all(integrity.checksum_ok(m.arbitration_id, m.data, 7) for m in frames)
     assert all((b - a) % 16 == 1 for a, b in zip(counters, counters[1:])), "a frame was lost on vcan1"
 
 
-def live_accuracy(live_csv, truth_csv, first_frame_time):
+def live_accuracy(live_csv, truth_csv, received_log, sent_frames):
+    """RMSE of the live estimates against the simulation's truth, each tick put on the drive's own time axis
+    through the frames' receive times (a player stalled by the guest's load stretches the live axis)."""
     live = read_table(live_csv)
-    live["t"] = live["t"] - live["t"][0] + first_frame_time  # ticks are anchored at the first frame
+    received = np.array([m.timestamp for m in can.LogReader(str(received_log))])
+    sent = np.array([m.timestamp for m in sent_frames])
+    assert len(received) == len(sent)
+    live["t"] = np.interp(live["t"], received, sent)
     return {s.state: s.rmse for s in score(live, read_table(truth_csv), skip=0.5)}, live
 
 
-def compare_with_offline(live, log):
+def compare_with_offline(live, received_log):
+    """The live estimates are the offline replay of what the daemon received: same ticks, same values (up to
+    the CSV's 9 digits), however the guest's load delayed the daemon. Live ends with idle ticks replay lacks."""
     offline = []
-    replay(read_config(), log, progress=False, on_estimate=offline.append)
-    n = min(len(offline), len(live["t"]))
-    offline_yaw = np.array([e.values["yaw_rate"] for e in offline[:n]])
-    started = np.isfinite(offline_yaw) & np.isfinite(live["yaw_rate"][:n])
-    difference = live["yaw_rate"][:n][started] - offline_yaw[started]
-    # Replay and live differ only where kernel timestamps move a frame across a tick boundary.
-    assert np.sqrt(np.mean(difference**2)) < np.radians(0.1)
-    assert np.max(np.abs(difference)) < np.radians(0.5)
+    replay(read_config(), received_log, progress=False, on_estimate=offline.append)
+    n = len(offline)
+    assert len(live["t"]) >= n
+    offline_yaw = np.array([e.values["yaw_rate"] for e in offline])
+    np.testing.assert_array_equal(np.isfinite(live["yaw_rate"][:n]), np.isfinite(offline_yaw))
+    np.testing.assert_allclose(live["yaw_rate"][:n], offline_yaw, rtol=1e-8, atol=1e-9)
 
 
 def read_config():
@@ -71,26 +81,30 @@ def read_config():
 
 
 class Capture:
-    """Frames on vcan1, by python-can and by can-utils' candump at the same time."""
+    """Frames on vcan1, by python-can and by can-utils' candump at the same time; and the input on vcan0 as
+    the daemon received it (candump: the kernel stamps a frame once, for every socket that receives it)."""
 
-    def __init__(self, candump_path):
+    def __init__(self, candump_path, input_path):
         self.python_can = live.Capture("vcan1")
         self.candump_path = candump_path
-        self.candump = subprocess.Popen(["candump", "-L", "vcan1"], stdout=open(candump_path, "w"))
+        self.candumps = [subprocess.Popen(["candump", "-L", channel], stdout=open(path, "w"))
+                         for channel, path in (("vcan1", candump_path), ("vcan0", input_path))]
         time.sleep(0.2)
 
     def finish(self):
         time.sleep(0.3)
         frames = self.python_can.stop()
-        self.candump.send_signal(signal.SIGINT)
-        self.candump.wait(timeout=10)
+        for candump in self.candumps:
+            candump.send_signal(signal.SIGINT)
+            candump.wait(timeout=10)
         return frames, list(can.LogReader(str(self.candump_path)))
 
 
 def run_end_to_end(tmp_path, dlc_run, play_command):
     log, truth_csv, sim = dlc_run
-    capture = Capture(tmp_path / "candump.log")
-    daemon = Daemon(tmp_path / "live.csv")
+    with receive_queues(4 * 1024 * 1024):  # every frame is asserted below: room for the guest's stalls
+        capture = Capture(tmp_path / "candump.log", tmp_path / "received.log")
+        daemon = Daemon(tmp_path / "live.csv")
     try:
         subprocess.run(play_command(log), check=True, timeout=120, capture_output=True)
         time.sleep(0.3)
@@ -104,13 +118,18 @@ def run_end_to_end(tmp_path, dlc_run, play_command):
     assert len(yaw_py) == len(yaw_dump) > 700
     assert [m.data for m in yaw_py] == [m.data for m in yaw_dump]
     check_integrity(yaw_py)
-    rmse, live = live_accuracy(tmp_path / "live.csv", truth_csv, sim.frames[0].timestamp)
-    superseded = int(re.search(r"superseded=(\d+)", stderr).group(1)) if "superseded=" in stderr else 0
-    assert len(yaw_py) == len(live["t"]) - superseded and superseded < 0.05 * len(live["t"])
+    rmse, live = live_accuracy(tmp_path / "live.csv", truth_csv, tmp_path / "received.log", sim.frames)
+    superseded = summary_count(stderr, "superseded")
+    print(f"superseded {superseded} of {len(live['t'])} ticks (the guest's load, not a guarantee)")
+    assert len(yaw_py) == len(live["t"]) - superseded
     sent_as = np.nan_to_num(live["yaw_rate"], nan=0.0)  # not-yet-initialized ticks go out as 0, flagged invalid
     assert_in_order([YAW_SIDESLIP.decode(m.data)["YawRate"] for m in yaw_py], sent_as, 1e-4)
-    assert rmse["vx"] < 0.1 and rmse["yaw_rate"] < 0.3 and rmse["beta"] < 0.5, rmse
-    compare_with_offline(live, log)
+    # Accuracy itself is asserted offline on the undistorted log; here the drive is what a player in the loaded
+    # guest made of it (its stalls stretch it by up to 5 %: yaw rate 0.2-0.32 deg/s RMSE), so this bound only
+    # says the live path tracks the car; the exact check is the equivalence with the offline replay below.
+    print("live RMSE against truth:", {state: round(float(value), 4) for state, value in rmse.items()})
+    assert rmse["vx"] < 0.1 and rmse["yaw_rate"] < 0.6 and rmse["beta"] < 0.5, rmse
+    compare_with_offline(live, tmp_path / "received.log")  # what the daemon received, kernel stamps and all
     return rmse
 
 
