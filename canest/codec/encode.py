@@ -15,7 +15,7 @@ import math
 import can
 
 from canest.codec import integrity
-from canest.codec.dbc import clamp_to_signal, load_database
+from canest.codec.dbc import clamp_to_signal, load_database, tolerated_problems
 from canest.codec.decode import InputDecoder
 from canest.errors import DbcError
 from canest.estimation.estimate import CAN_VALID_BITS, MODES, Estimate
@@ -57,8 +57,9 @@ def integrity_signals(message):
     return counter, checksum
 
 
-def contract_gaps(database) -> list:
-    """What the output DBC lacks of canest's contract: messages, signals, counter and CRC, Mode values."""
+def contract_gaps(database, broken=None) -> list:
+    """What the output DBC lacks of canest's contract: messages, signals, counter and CRC, Mode values; and
+    which of its messages are ``broken`` ({message name: problem})."""
     required = {**{name: list(fields) for name, fields in OUTPUT_MESSAGES.items()},
                 STATUS_MESSAGE: list(STATUS_SIGNALS), CAUSE_MESSAGE: list(CAUSE_SIGNALS)}
     gaps = []
@@ -68,6 +69,8 @@ def contract_gaps(database) -> list:
         except KeyError:
             gaps.append(f"message {name}")
             continue
+        if name in (broken or {}):
+            gaps.append(f"a well-formed message {name} ({broken[name]})")
         present = {s.name: s for s in message.signals}
         gaps += [f"signal {name}.{signal}" for signal in signals if signal not in present]
         gaps += [f"a *_{suffix} signal in {name}" for suffix in ("Counter", "CRC")
@@ -105,7 +108,7 @@ class EstimateEncoder:
 
     def __init__(self, dbc_path, channel=None):
         self.database = load_database(dbc_path, "output.dbc")
-        gaps = contract_gaps(self.database)
+        gaps = contract_gaps(self.database, tolerated_problems(dbc_path, "output.dbc"))
         if gaps:
             raise DbcError(f"{dbc_path}: output DBC lacks {', '.join(gaps)}; start from dbc/canest_estimates.dbc "
                            "(README 'DBC contract')")
@@ -186,8 +189,8 @@ class InputEncoder:
             if valid:
                 values[valid.signal] = valid.values[0] if valid.values else 1
         data = bytearray(message.encode(values, strict=False))
-        if plan.crc_index is not None:
-            data = integrity.seal(frame_id, data, plan.crc_index)
+        if plan.checksum is not None:
+            data = plan.checksum.seal(frame_id, data)
         return can.Message(timestamp=timestamp, arbitration_id=frame_id, is_extended_id=message.is_extended_frame,
                            data=bytes(data), is_fd=message.is_fd if plan.is_fd is None else plan.is_fd,
                            channel=channel)
