@@ -154,6 +154,16 @@ class EstimateEncoder:
         return frames
 
 
+def _encodable(signal) -> tuple:
+    """(lowest, highest) physical value the signal's bits can hold (a DBC's declared range may say less or more)."""
+    if signal.is_float:
+        return -math.inf, math.inf
+    bits = signal.length
+    raw = (-(1 << (bits - 1)), (1 << (bits - 1)) - 1) if signal.is_signed else (0, (1 << bits) - 1)
+    low, high = sorted(r * signal.scale + signal.offset for r in raw)
+    return low, high
+
+
 class InputEncoder:
     """Encode canonical SI values into input frames (the simulator's side of the signal map)."""
 
@@ -165,6 +175,21 @@ class InputEncoder:
     @property
     def messages(self):
         return [plan.message for plan in self.decoder_plans.values()]
+
+    @staticmethod
+    def _parts(plan, spec, value: float) -> dict:
+        """DBC values of the signals adding up to ``value`` (limited to the spec's range): each but the last takes
+        what its resolution carries of the rest (coarse + fine steering), every one within what its bits hold."""
+        low, high = spec.range
+        rest = min(max(value, -math.inf if low is None else low), math.inf if high is None else high)
+        parts = {}
+        for i, name in enumerate(spec.names):
+            signal = plan.signal_by_name[name]
+            part = rest if i == len(spec.names) - 1 else round(rest / signal.scale) * signal.scale
+            lowest, highest = _encodable(signal)
+            parts[name] = min(max(part, lowest), highest)
+            rest -= parts[name]
+        return parts
 
     def encode(self, frame_id: int, si_values: dict, timestamp: float, channel: str = "vcan0") -> can.Message:
         plan = self.decoder_plans[frame_id]
@@ -179,8 +204,7 @@ class InputEncoder:
             values[signal.name] = page if signal.is_multiplexer else clamp_to_signal(signal, 0.0)
         for spec in plan.specs:
             if spec.signal in values and spec.canonical in si_values:
-                raw = (si_values[spec.canonical] - spec.offset) / spec.factor
-                values[spec.signal] = clamp_to_signal(plan.signal_by_name[spec.signal], raw)
+                values.update(self._parts(plan, spec, (si_values[spec.canonical] - spec.offset) / spec.factor))
         checks = plan.checks
         if checks.counter:
             values[checks.counter] = self.counters[frame_id]

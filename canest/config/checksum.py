@@ -6,7 +6,7 @@ polynomial: 0x2F, ...}`` (a CRC described by its parameters, :class:`canest.sett
 """
 from __future__ import annotations
 
-from canest.codec.checksums import ALGORITHMS
+from canest.codec.checksums import ALGORITHMS, CRC_WIDTHS
 from canest.settings import CrcParameters
 from canest.yamldoc import Document
 
@@ -33,7 +33,10 @@ def _crc(doc: Document, where: tuple, entry: dict, length: int) -> CrcParameters
     for key in ("width", "polynomial"):
         if key not in entry:
             raise doc.error(where, f"algorithm crc needs '{key}' (and optionally {', '.join(CRC_KEYS[2:])})")
-    width = _integer(doc, where + ("width",), entry["width"], 8, 32, "8, 16, 24 or 32 bits")
+    width = entry["width"]
+    if isinstance(width, bool) or width not in CRC_WIDTHS:
+        raise doc.error(where + ("width",), f"must be {', '.join(map(str, CRC_WIDTHS[:-1]))} or {CRC_WIDTHS[-1]} "
+                                            f"bits, got {width!r}")
     top = (1 << width) - 1
     polynomial = _integer(doc, where + ("polynomial",), entry["polynomial"], 1, top,
                           "the generator without its top bit (0x1D for CRC-8/SAE-J1850)")
