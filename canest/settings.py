@@ -54,6 +54,7 @@ class SignalSpec:
     multiplexer_value: int | None = None
     parts: tuple = ()
     range: tuple = (None, None)
+    range_given: bool = False  # the config's range replaces the DBC's (a DBC range that is wrong for the car)
     valid: ValidWhen | None = None
     stuck_after: float | None = None  # s: the same raw value this long while the car moves is a stuck sender
     learn_zero: bool = False  # a relative angle: its zero is learned while driving straight

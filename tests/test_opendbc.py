@@ -17,6 +17,7 @@ import yaml
 
 from canest.codec.checksums import GenericCrc
 from canest.codec.decode import InputDecoder
+from canest.codec.encode import InputEncoder
 from canest.config import load_config
 from canest.errors import ConfigError, DbcError
 from canest.settings import CrcParameters
@@ -272,3 +273,15 @@ def test_generic_crc_parameters_are_checked(tmp_path, checksum, problem):
     path = write_config(tmp_path, vw_config(tmp_path, checksum))
     with pytest.raises(ConfigError, match=problem):
         InputDecoder(load_config(path))
+
+
+@pytest.mark.parametrize("degrees", [10.3, -7.45, 0.05, -123.4])
+def test_simulator_splits_coarse_plus_fine_steering_as_a_toyota_sends_it(tmp_path, degrees):
+    config = load_config(toyota(tmp_path))
+    encoder = InputEncoder(config)
+    sent = encoder.encode(0x25, {"steering_wheel_angle": math.radians(degrees)}, 0.0)
+    raw = encoder.decoder_plans[0x25].message.decode(sent.data)
+    assert abs(raw["STEER_FRACTION"]) <= 0.7 and raw["STEER_ANGLE"] % 1.5 == pytest.approx(0.0, abs=1e-9)
+    assert raw["STEER_ANGLE"] + raw["STEER_FRACTION"] == pytest.approx(degrees, abs=0.05 + 1e-9)
+    decoded = dict(InputDecoder(config).decode(sent))
+    assert math.degrees(decoded["steering_wheel_angle"]) == pytest.approx(degrees, abs=0.05 + 1e-9)

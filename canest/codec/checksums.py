@@ -12,29 +12,18 @@ per frame) and ``seal(frame_id, data)`` (the simulator writing frames).
 """
 from __future__ import annotations
 
-import importlib
-
 import crcmod
 
 from canest.codec import integrity
+from canest.codec.opendbc_dbcs import INSTALL as OPENDBC_INSTALL
 from canest.errors import DependencyError
 from canest.settings import CrcParameters
 
-OPENDBC_INSTALL = "pip install canest[opendbc] (opendbc needs Python 3.11 or 3.12)"
-# name -> (opendbc module, function, the DBCs opendbc checks with it)
+# algorithm name -> an opendbc DBC name (prefix) it checks: opendbc's own get_checksum_state gives its function
 BRANDS = {
-    "toyota": ("opendbc.car.toyota.toyotacan", "toyota_checksum", "Toyota, Lexus"),
-    "honda": ("opendbc.car.honda.hondacan", "honda_checksum", "Honda, Acura"),
-    "hyundai_canfd": ("opendbc.car.hyundai.hyundaicanfd", "hkg_can_fd_checksum", "Hyundai/Kia/Genesis CAN FD"),
-    "vw_mqb": ("opendbc.car.volkswagen.mqbcan", "volkswagen_mqb_meb_checksum", "VW MQB, MQB evo, MEB (CRC with data ID)"),
-    "vw_mlb": ("opendbc.car.volkswagen.mlbcan", "volkswagen_mlb_checksum", "VW MLB"),
-    "vw_pq": ("opendbc.car.volkswagen.mqbcan", "xor_checksum", "VW PQ (XOR of the data)"),
-    "subaru": ("opendbc.car.subaru.subarucan", "subaru_checksum", "Subaru global"),
-    "chrysler": ("opendbc.car.chrysler.chryslercan", "chrysler_checksum", "Chrysler/FCA"),
-    "fca_giorgio": ("opendbc.car.chrysler.chryslercan", "fca_giorgio_checksum", "FCA Giorgio (Alfa Romeo)"),
-    "tesla": ("opendbc.car.tesla.teslacan", "tesla_checksum", "Tesla Model 3/Y party bus"),
-    "psa": ("opendbc.car.psa.psacan", "psa_checksum", "PSA (Peugeot, Citroen)"),
-    "comma_body": ("opendbc.car.body.bodycan", "body_checksum", "comma body"),
+    "toyota": "toyota_", "honda": "honda_", "hyundai_canfd": "hyundai_canfd_generated", "vw_mqb": "vw_mqb",
+    "vw_mlb": "vw_mlb", "vw_pq": "vw_pq", "subaru": "subaru_global_", "chrysler": "chrysler_",
+    "fca_giorgio": "fca_giorgio", "tesla": "tesla_model3_party", "psa": "psa_", "comma_body": "comma_body",
 }
 ALGORITHMS = ("canest", "crc", *BRANDS)
 CRC_WIDTHS = (8, 16, 24, 32)  # the widths crcmod computes
@@ -83,11 +72,11 @@ class BrandChecksum:
     """opendbc's checksum function of a brand, called as opendbc's CAN parser and packer call it."""
 
     def __init__(self, algorithm: str, signal, length: int, feature: str):
-        module_name, function, _ = BRANDS[algorithm]
-        module = DependencyError.require(module_name, f"{feature} (checksum algorithm {algorithm})", OPENDBC_INSTALL)
-        self.function = getattr(module, function)
+        dbc = DependencyError.require("opendbc.can.dbc", f"{feature} (checksum algorithm {algorithm})",
+                                      OPENDBC_INSTALL)
+        self.function = dbc.get_checksum_state(BRANDS[algorithm]).calc_checksum
         self.field = BitField(signal, length)
-        self.signal = _opendbc_signal(signal)
+        self.signal = _opendbc_signal(dbc.Signal, signal)
 
     def ok(self, frame_id: int, data) -> bool:
         return self.function(frame_id, self.signal, bytearray(data)) == self.field.read(data)
@@ -97,18 +86,17 @@ class BrandChecksum:
         return bytes(data)
 
 
-def _opendbc_signal(signal):
-    """opendbc's description of a cantools signal (its functions read the start bit of some)."""
-    from opendbc.can.dbc import Signal
-
+def _opendbc_signal(opendbc_signal, signal):
+    """opendbc's description (``opendbc.can.dbc.Signal``) of a cantools signal (its functions read the start bit
+    of some)."""
     little = signal.byte_order == "little_endian"
     if little:
         msb, lsb = signal.start + signal.length - 1, signal.start
     else:
         last = 8 * (signal.start // 8) + 7 - signal.start % 8 + signal.length - 1
         msb, lsb = signal.start, 8 * (last // 8) + 7 - last % 8
-    return Signal(signal.name, signal.start, msb, lsb, signal.length, signal.is_signed, signal.scale, signal.offset,
-                  little)
+    return opendbc_signal(signal.name, signal.start, msb, lsb, signal.length, signal.is_signed, signal.scale,
+                          signal.offset, little)
 
 
 def _reflect(value: int, width: int) -> int:

@@ -178,16 +178,16 @@ class InputEncoder:
 
     @staticmethod
     def _parts(plan, spec, value: float) -> dict:
-        """DBC values of the signals adding up to ``value`` (limited to the spec's range): each but the last takes
-        what its resolution carries of the rest (coarse + fine steering), every one within what its bits hold."""
-        low, high = spec.range
-        rest = min(max(value, -math.inf if low is None else low), math.inf if high is None else high)
-        parts = {}
+        """DBC values of the signals adding up to ``value``: each but the last takes what its resolution carries of
+        the rest (coarse + fine steering), every one within what its bits hold and, unless the config replaced the
+        range, within its DBC range (a sender keeps to what it can send, not to the config's range)."""
+        parts, rest = {}, value
         for i, name in enumerate(spec.names):
             signal = plan.signal_by_name[name]
             part = rest if i == len(spec.names) - 1 else round(rest / signal.scale) * signal.scale
             lowest, highest = _encodable(signal)
-            parts[name] = min(max(part, lowest), highest)
+            part = min(max(part, lowest), highest)
+            parts[name] = part if spec.range_given else clamp_to_signal(signal, part)
             rest -= parts[name]
         return parts
 

@@ -193,7 +193,8 @@ def read_signal_specs(doc: Document, database, dbc_path: Path, vehicle: VehicleP
         mux = int(signal.multiplexer_ids[0]) if signal.multiplexer_ids else None
         specs[canonical] = SignalSpec(canonical, message.name, signal.name, sign * scale * factor, offset, mux,
                                       parts=tuple(s.name for s in signals[1:]),
-                                      range=_range(doc, where, entry, signals), valid=valid,
+                                      range=_range(doc, where, entry, signals), range_given="range" in entry,
+                                      valid=valid,
                                       stuck_after=stuck_after, learn_zero=zero == "learn")
     return specs
 
