@@ -54,6 +54,7 @@ class SignalSpec:
     multiplexer_value: int | None = None
     parts: tuple = ()
     range: tuple = (None, None)
+    range_given: bool = False  # the config's range replaces the DBC's (a DBC range that is wrong for the car)
     valid: ValidWhen | None = None
     stuck_after: float | None = None  # s: the same raw value this long while the car moves is a stuck sender
     learn_zero: bool = False  # a relative angle: its zero is learned while driving straight
@@ -65,14 +66,37 @@ class SignalSpec:
 
 
 @dataclass(frozen=True)
+class CrcParameters:
+    """A CRC in the Rocksoft model (as the CRC catalogue names them) and what it covers of a frame.
+
+    Covered: data bytes ``first_byte`` to ``last_byte`` (inclusive) but the checksum's own, with ``data_id``
+    (bytes) fed before them (``data_id_at: start``) or after them (``end``, as AUTOSAR E2E profiles 2 and 5)."""
+
+    width: int
+    polynomial: int
+    init: int = 0
+    xor_out: int = 0
+    reflect_in: bool = False
+    reflect_out: bool = False
+    data_id: tuple = ()
+    data_id_at: str = "end"
+    first_byte: int = 0
+    last_byte: int | None = None  # None: the frame's last
+
+
+@dataclass(frozen=True)
 class MessageChecks:
     """Optional integrity checks and overrides of an input message.
 
     ``fd``: which frames are accepted, ``dbc`` (as its DBC declares), ``classic``, ``fd`` or ``any``;
-    ``cycle_time`` (s) overrides the DBC's ``GenMsgCycleTime`` for the timeouts."""
+    ``cycle_time`` (s) overrides the DBC's ``GenMsgCycleTime`` for the timeouts. ``checksum_algorithm``:
+    ``canest`` (CRC-8/SAE-J1850 over the frame ID and data), an opendbc brand's (``toyota``, ...) or ``crc``
+    (described by ``crc``), see :mod:`canest.codec.checksums`."""
 
     counter: str | None = None
     checksum: str | None = None
+    checksum_algorithm: str = "canest"
+    crc: CrcParameters | None = None
     valid: ValidWhen | None = None
     fd: str = "dbc"
     cycle_time: float | None = None
@@ -111,6 +135,7 @@ class Config:
     signals: dict  # canonical -> SignalSpec
     messages: dict  # message name -> MessageChecks
     estimator: EstimatorConfig
+    tolerated: dict = field(default_factory=dict)  # input DBC message no signal is taken from -> why a strict load refuses it
 
     def with_buses(self, input_bus: BusConfig | None = None, output_bus: BusConfig | None = None) -> "Config":
         return dataclasses.replace(self, input_bus=input_bus or self.input_bus, output_bus=output_bus or self.output_bus)

@@ -13,7 +13,7 @@ from collections import Counter
 
 import can
 
-from canest.codec import integrity
+from canest.codec.checksums import make_checksum
 from canest.codec.dbc import load_database
 from canest.codec.plausibility import SlewLimit
 from canest.codec.sample_checks import MOVING_WHEEL_SPEED, SignalBounds, StuckDetector
@@ -33,12 +33,14 @@ class _MessagePlan:
         # per mapped signal, fixed at start-up: (spec, the DBC signals adding up to its value, its bounds)
         self.signals = [(spec, spec.names, SignalBounds(spec.range, self.signal_by_name[spec.signal].scale))
                         for spec in specs]
-        self.crc_index = None
+        self.checksum = None  # resolved once: per frame only its ok() runs
         if self.checks.checksum:
+            where = f"{config_path}: input.messages.{message.name}.checksum"
             try:
-                self.crc_index = integrity.checksum_byte(self.signal_by_name[self.checks.checksum])
+                self.checksum = make_checksum(self.checks.checksum_algorithm, self.checks.crc,
+                                              self.signal_by_name[self.checks.checksum], message.length, where)
             except ValueError as exc:
-                raise ConfigError(f"{config_path}: input.messages.{message.name}.checksum: {exc}") from None
+                raise ConfigError(f"{where}: {exc}") from None
         self.last_counter = None
         self.counter_modulus = 2 ** self.signal_by_name[self.checks.counter].length if self.checks.counter else 0
         self.is_fd = {"dbc": message.is_fd, "fd": True, "classic": False}.get(self.checks.fd)  # None: any
@@ -128,7 +130,7 @@ class InputDecoder:
             return self._reject("fd_mismatch")
         if len(msg.data) != plan.message.length:
             return self._reject("dlc")
-        if plan.crc_index is not None and not integrity.checksum_ok(msg.arbitration_id, msg.data, plan.crc_index):
+        if plan.checksum is not None and not plan.checksum.ok(msg.arbitration_id, msg.data):
             return self._reject("checksum")
         try:
             values = plan.message.decode(msg.data, decode_choices=False)

@@ -15,7 +15,7 @@ import math
 import can
 
 from canest.codec import integrity
-from canest.codec.dbc import clamp_to_signal, load_database
+from canest.codec.dbc import clamp_to_signal, load_database, tolerated_problems
 from canest.codec.decode import InputDecoder
 from canest.errors import DbcError
 from canest.estimation.estimate import CAN_VALID_BITS, MODES, Estimate
@@ -57,8 +57,9 @@ def integrity_signals(message):
     return counter, checksum
 
 
-def contract_gaps(database) -> list:
-    """What the output DBC lacks of canest's contract: messages, signals, counter and CRC, Mode values."""
+def contract_gaps(database, broken=None) -> list:
+    """What the output DBC lacks of canest's contract: messages, signals, counter and CRC, Mode values; and
+    which of its messages are ``broken`` ({message name: problem})."""
     required = {**{name: list(fields) for name, fields in OUTPUT_MESSAGES.items()},
                 STATUS_MESSAGE: list(STATUS_SIGNALS), CAUSE_MESSAGE: list(CAUSE_SIGNALS)}
     gaps = []
@@ -68,6 +69,8 @@ def contract_gaps(database) -> list:
         except KeyError:
             gaps.append(f"message {name}")
             continue
+        if name in (broken or {}):
+            gaps.append(f"a well-formed message {name} ({broken[name]})")
         present = {s.name: s for s in message.signals}
         gaps += [f"signal {name}.{signal}" for signal in signals if signal not in present]
         gaps += [f"a *_{suffix} signal in {name}" for suffix in ("Counter", "CRC")
@@ -105,7 +108,7 @@ class EstimateEncoder:
 
     def __init__(self, dbc_path, channel=None):
         self.database = load_database(dbc_path, "output.dbc")
-        gaps = contract_gaps(self.database)
+        gaps = contract_gaps(self.database, tolerated_problems(dbc_path, "output.dbc"))
         if gaps:
             raise DbcError(f"{dbc_path}: output DBC lacks {', '.join(gaps)}; start from dbc/canest_estimates.dbc "
                            "(README 'DBC contract')")
@@ -151,6 +154,16 @@ class EstimateEncoder:
         return frames
 
 
+def _encodable(signal) -> tuple:
+    """(lowest, highest) physical value the signal's bits can hold (a DBC's declared range may say less or more)."""
+    if signal.is_float:
+        return -math.inf, math.inf
+    bits = signal.length
+    raw = (-(1 << (bits - 1)), (1 << (bits - 1)) - 1) if signal.is_signed else (0, (1 << bits) - 1)
+    low, high = sorted(r * signal.scale + signal.offset for r in raw)
+    return low, high
+
+
 class InputEncoder:
     """Encode canonical SI values into input frames (the simulator's side of the signal map)."""
 
@@ -162,6 +175,21 @@ class InputEncoder:
     @property
     def messages(self):
         return [plan.message for plan in self.decoder_plans.values()]
+
+    @staticmethod
+    def _parts(plan, spec, value: float) -> dict:
+        """DBC values of the signals adding up to ``value``: each but the last takes what its resolution carries of
+        the rest (coarse + fine steering), every one within what its bits hold and, unless the config replaced the
+        range, within its DBC range (a sender keeps to what it can send, not to the config's range)."""
+        parts, rest = {}, value
+        for i, name in enumerate(spec.names):
+            signal = plan.signal_by_name[name]
+            part = rest if i == len(spec.names) - 1 else round(rest / signal.scale) * signal.scale
+            lowest, highest = _encodable(signal)
+            part = min(max(part, lowest), highest)
+            parts[name] = part if spec.range_given else clamp_to_signal(signal, part)
+            rest -= parts[name]
+        return parts
 
     def encode(self, frame_id: int, si_values: dict, timestamp: float, channel: str = "vcan0") -> can.Message:
         plan = self.decoder_plans[frame_id]
@@ -176,8 +204,7 @@ class InputEncoder:
             values[signal.name] = page if signal.is_multiplexer else clamp_to_signal(signal, 0.0)
         for spec in plan.specs:
             if spec.signal in values and spec.canonical in si_values:
-                raw = (si_values[spec.canonical] - spec.offset) / spec.factor
-                values[spec.signal] = clamp_to_signal(plan.signal_by_name[spec.signal], raw)
+                values.update(self._parts(plan, spec, (si_values[spec.canonical] - spec.offset) / spec.factor))
         checks = plan.checks
         if checks.counter:
             values[checks.counter] = self.counters[frame_id]
@@ -186,8 +213,8 @@ class InputEncoder:
             if valid:
                 values[valid.signal] = valid.values[0] if valid.values else 1
         data = bytearray(message.encode(values, strict=False))
-        if plan.crc_index is not None:
-            data = integrity.seal(frame_id, data, plan.crc_index)
+        if plan.checksum is not None:
+            data = plan.checksum.seal(frame_id, data)
         return can.Message(timestamp=timestamp, arbitration_id=frame_id, is_extended_id=message.is_extended_frame,
                            data=bytes(data), is_fd=message.is_fd if plan.is_fd is None else plan.is_fd,
                            channel=channel)

@@ -37,6 +37,19 @@ def _overrides(spec) -> str:
     return f"  ({'; '.join(notes)})" if notes else ""
 
 
+def _checks(checks) -> list:
+    """What is checked on a message: ``counter``, ``checksum`` (with its algorithm unless canest's), ``fd=...``."""
+    out = []
+    for key, value in vars(checks).items():
+        if not value or value == "dbc" or key in ("checksum_algorithm", "crc"):
+            continue
+        if key == "checksum" and checks.checksum_algorithm != "canest":
+            out.append(f"checksum={checks.checksum_algorithm}")
+        else:
+            out.append(f"{key}={value}" if key in ("fd", "cycle_time") else key)
+    return out
+
+
 def run(args) -> int:
     config = config_from_args(args)
     decoder = InputDecoder(config)
@@ -60,9 +73,11 @@ def run(args) -> int:
                   f"{plan.message.frame_id:>#6x} {f'{seconds * 1000:g}ms ({source})':>14} "
                   f"{timeouts[spec.canonical]:>7.3f}s  {si_unit(spec.canonical)} = "
                   f"{spec.factor:.6g} * value + {spec.offset:g}{_overrides(spec)}")
-    checked = [f"{name} ({', '.join(f'{k}={v}' if k in ('fd', 'cycle_time') else k for k, v in vars(c).items() if v and v != 'dbc')})"
-               for name, c in config.messages.items()]
+    checked = [f"{name} ({', '.join(_checks(c))})" for name, c in config.messages.items()]
     if checked:
         print("\nintegrity checks: " + "; ".join(checked))
+    for message, problem in config.tolerated.items():
+        print(f"tolerated in the input DBC ({f'no signal is taken from {message}' if message else 'lenient load'}): "
+              f"{problem}")
     print("\nOK")
     return 0

@@ -13,9 +13,11 @@ messages) and :mod:`canest.config.estimator`.
 """
 from __future__ import annotations
 
+import logging
 from pathlib import Path
 
-from canest.codec.dbc import load_database
+from canest.codec.dbc import load_database, tolerated_problems
+from canest.codec.opendbc_dbcs import PREFIX as OPENDBC_PREFIX, closest_names, opendbc_path
 from canest.config.buses import read_bus
 from canest.config.estimator import check_model_inputs, read_estimator
 from canest.config.signal_map import read_message_checks, read_signal_specs
@@ -27,6 +29,7 @@ from canest.yamldoc import Document
 BUILTIN_DIR = Path(__file__).resolve().parent.parent / "data"
 BUILTIN_PREFIX = "builtin:"
 DEFAULT_CONFIG = BUILTIN_DIR / "dici_ev.yaml"
+LOG = logging.getLogger(__name__)
 __all__ = ["BUILTIN_DIR", "BUILTIN_PREFIX", "DEFAULT_CONFIG", "ConfigError", "load_config"]
 
 SECTION_KEYS = {
@@ -37,7 +40,8 @@ SECTION_KEYS = {
 
 
 def _dbc_path(doc: Document, key_path: tuple) -> Path:
-    """The DBC file ``key_path`` names: a path relative to the config, or ``builtin:NAME`` for canest's own."""
+    """The DBC file ``key_path`` names: a path relative to the config, ``builtin:NAME`` for canest's own or
+    ``opendbc:NAME`` for one of opendbc's (the optional package)."""
     given = doc.text(key_path[:-1], doc.section(key_path[:-1]), key_path[-1])
     if given is None:
         raise doc.error(key_path, "missing DBC path")
@@ -50,6 +54,13 @@ def _dbc_path(doc: Document, key_path: tuple) -> Path:
             raise doc.error(key_path, f"no built-in DBC '{name}'; built in: "
                                       f"{', '.join(BUILTIN_PREFIX + b for b in builtin)}")
         return (BUILTIN_DIR / name).resolve()
+    if given.startswith(OPENDBC_PREFIX):
+        name = given[len(OPENDBC_PREFIX):]
+        feature = f"{doc.path}: {'.'.join(key_path)}: {given}"
+        path = opendbc_path(name, feature)
+        if path is None:
+            raise doc.error(key_path, f"opendbc has no DBC '{name}'; {closest_names(name, feature)}")
+        return path
     path = (doc.path.resolve().parent / given).resolve()
     if path.is_file():
         return path
@@ -71,6 +82,10 @@ def load_config(path) -> Config:
     specs = read_signal_specs(doc, input_db, input_dbc, vehicle)
     estimator = read_estimator(doc)
     check_model_inputs(doc, estimator, specs)
+    tolerated = tolerated_problems(input_dbc, f"{path}: input.dbc")
+    for message, problem in tolerated.items():
+        LOG.warning("%s: input.dbc %s: %s (tolerated: %s)", path, input_dbc, problem,
+                    f"no signal is taken from {message}" if message else "loaded without cantools' strict checks")
     return Config(
         path=path.resolve(),
         vehicle=vehicle,
@@ -81,4 +96,5 @@ def load_config(path) -> Config:
         signals=specs,
         messages=read_message_checks(doc, input_db, input_dbc, specs),
         estimator=estimator,
+        tolerated=tolerated,
     )

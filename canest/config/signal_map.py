@@ -7,14 +7,16 @@ from pathlib import Path
 
 from canest import limits
 from canest import signals as sig
-from canest.codec.dbc import clamp_to_signal
+from canest.codec.dbc import clamp_to_signal, tolerated_problems
+from canest.config.checksum import read_checksum
+from canest.errors import DbcError
 from canest.params import VehicleParams
 from canest.settings import MessageChecks, SignalSpec, ValidWhen
 from canest.yamldoc import Document, suggestion
 
 SIGNAL_KEYS = ("signal", "unit", "sign", "scale", "offset", "range", "valid", "stuck_after", "zero")
-MESSAGE_KEYS = tuple(f.name for f in dataclasses.fields(MessageChecks))
-SIGNAL_ROLES = ("counter", "checksum")  # message keys that name a signal of the message
+MESSAGE_KEYS = tuple(f.name for f in dataclasses.fields(MessageChecks) if f.name not in ("checksum_algorithm", "crc"))
+SIGNAL_ROLES = ("counter", "checksum")  # message keys that name a signal of the message (checksum: or a mapping)
 VALID_KEYS = ("signal", "values")
 FD_CHOICES = {True: "fd", False: "classic", "any": "any"}  # input.messages.*.fd; absent: as the DBC declares
 MAX_PARTS = 8  # signals one composite input may add up
@@ -52,6 +54,10 @@ def _mapped_signal(doc: Document, where: tuple, database, dbc_path: Path, given)
         choices = [s.name for s in message.signals]
         raise doc.error(where, f"no signal '{signal_name}' in message '{message_name}' of {dbc_path}; "
                                f"{suggestion(signal_name, choices)}")
+    broken = tolerated_problems(dbc_path, f"{doc.path}: input.dbc").get(message_name)
+    if broken:
+        raise DbcError(str(doc.error(where, f"message '{message_name}' of {dbc_path} is malformed: {broken} "
+                                            "Fix the message in the DBC, or map a signal of another message")))
     sharing = [m.name for m in database.messages if m is not message and m.frame_id == message.frame_id
                and m.is_extended_frame == message.is_extended_frame]
     if sharing:
@@ -187,7 +193,8 @@ def read_signal_specs(doc: Document, database, dbc_path: Path, vehicle: VehicleP
         mux = int(signal.multiplexer_ids[0]) if signal.multiplexer_ids else None
         specs[canonical] = SignalSpec(canonical, message.name, signal.name, sign * scale * factor, offset, mux,
                                       parts=tuple(s.name for s in signals[1:]),
-                                      range=_range(doc, where, entry, signals), valid=valid,
+                                      range=_range(doc, where, entry, signals), range_given="range" in entry,
+                                      valid=valid,
                                       stuck_after=stuck_after, learn_zero=zero == "learn")
     return specs
 
@@ -212,8 +219,13 @@ def read_message_checks(doc: Document, database, dbc_path: Path, specs: dict) ->
         doc.reject_unknown(where, entry, MESSAGE_KEYS)
         names = [s.name for s in message.signals]
         roles = {}
+        checksum = {}
+        if "checksum" in entry:
+            roles["checksum"], algorithm, crc = read_checksum(doc, where + ("checksum",), entry["checksum"],
+                                                              message.length)
+            checksum = {"checksum_algorithm": algorithm, "crc": crc}
         for role in SIGNAL_ROLES:
-            signal_name = doc.text(where, entry, role)
+            signal_name = roles.get(role) or doc.text(where, entry, role)
             if signal_name is not None and signal_name not in names:
                 raise doc.error(where + (role,), f"no signal '{signal_name}' in message '{name}' of {dbc_path}; "
                                                  f"{suggestion(signal_name, names)}")
@@ -225,6 +237,6 @@ def read_message_checks(doc: Document, database, dbc_path: Path, specs: dict) ->
         cycle_time = doc.number(where, entry, "cycle_time", limits.MESSAGE["cycle_time"]) \
             if "cycle_time" in entry else None
         valid = _valid_when(doc, where + ("valid",), message, dbc_path, entry["valid"]) if "valid" in entry else None
-        checks[name] = MessageChecks(**roles, valid=valid, fd=FD_CHOICES[fd] if "fd" in entry else "dbc",
+        checks[name] = MessageChecks(**roles, **checksum, valid=valid, fd=FD_CHOICES[fd] if "fd" in entry else "dbc",
                                      cycle_time=cycle_time)
     return checks

@@ -1,9 +1,9 @@
 """Drive the plant through a maneuver and produce CAN frames plus the truth.
 
 The plant integrates at ``PLANT_DT``; the driver acts every ``CONTROL_DT``;
-every mapped input message is sent at its DBC cycle time (``GenMsgCycleTime``)
-with a random phase, encoded through the config's signal map; the truth is
-sampled every ``TRUTH_DT``. Times are seconds on the log's clock, starting at
+every mapped input message is sent at its cycle time (the config's
+``cycle_time``, else the DBC's ``GenMsgCycleTime``) with a random phase,
+encoded through the config's signal map; the truth is sampled every ``TRUTH_DT``. Times are seconds on the log's clock, starting at
 ``start_time``.
 """
 from __future__ import annotations
@@ -78,7 +78,8 @@ def simulate(config: Config, maneuver: str, speed_kmh: float, mu, *, duration=No
     encoder = InputEncoder(config)
     state = plant.initial_state(speed)
     state[X] = plan.start_x
-    cycles = {m.frame_id: m.cycle_time / 1000.0 if m.cycle_time else DEFAULT_CYCLE for m in encoder.messages}
+    cycles = {fid: plan.checks.cycle_time or (plan.message.cycle_time / 1000.0 if plan.message.cycle_time else
+                                             DEFAULT_CYCLE) for fid, plan in encoder.decoder_plans.items()}
     schedule = [(float(rng.uniform(0, cycle)), frame_id, cycle) for frame_id, cycle in cycles.items()]
     heapq.heapify(schedule)
     steps = int(round(plan.duration / PLANT_DT))
