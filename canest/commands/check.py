@@ -4,9 +4,12 @@ from __future__ import annotations
 from canest.commands.common import FORMATTER, add_config, config_from_args
 from canest.codec.decode import InputDecoder
 from canest.codec.encode import EstimateEncoder
+from canest.estimation.catalog import losses
 from canest.signals import si_unit
 
 EPILOG = """Every error names the file, the line and the key, message or signal.
+Inputs the config does not map are listed with what each costs: the models
+and filters of the catalog that need it, and the states not estimated then.
 Exit status 0 when the config is usable, 2 when it is not."""
 
 
@@ -64,5 +67,9 @@ def run(args) -> int:
                for name, c in config.messages.items()]
     if checked:
         print("\nintegrity checks: " + "; ".join(checked))
+    missing = losses(config.signals)
+    if missing:
+        print("\ninputs not mapped, and what they cost:")
+        print("\n".join(f"  {line}" for line in missing))
     print("\nOK")
     return 0
