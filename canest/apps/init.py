@@ -92,12 +92,13 @@ def signal_lines(found: dict) -> list:
         if canonical not in found:
             continue
         best, *others = found[canonical]
-        notes = [f"unit {best.unit}"]
+        notes = [f"ASSUMED unit {best.unit}: the DBC gives none" if best.assumed else f"unit {best.unit}"]
         if canonical.startswith("wheel_speed_") and normal_unit(best.unit) in LINEAR_SPEED_UNITS:
             notes.append("a linear speed: rad/s through vehicle.wheel_radius")
         if others:
             notes.append("else: " + ", ".join(o.reference for o in others))
-        lines.append(f"    {canonical}: {best.reference}    # CONFIRM: {'; '.join(notes)}")
+        entry = f"{{signal: {best.reference}, unit: {best.unit}}}" if best.assumed else best.reference
+        lines.append(f"    {canonical}: {entry}    # CONFIRM: {'; '.join(notes)}")
     return lines
 
 

@@ -20,12 +20,10 @@ AGAINST = {"REQ", "RQ", "REQUEST", "CMD", "COMMAND", "TARGET", "DES", "DESIRED",
            "OFFSET", "OFFST", "ERR", "ERROR", "QF", "CNT", "COUNTER", "CS", "CHECKSUM", "CRC", "STAT", "STATUS", "VALID",
            "LKA", "LKAS", "APA", "ACC", "AEB", "PCS", "FILT", "RAW", "INIT", "TOLERANCE", "DIFF", "DELTA",
            "ADJUST", "MOTOR", "EPS", "OVERRIDE", "CALIBRATION", "CAL", "TORQUE", "TQ", "RATE", "SPEED", "DIR"}
-POSITIONS = {
-    "fl": ({"FL", "LF", "VL"}, ({"FRONT", "F", "VORNE"}, {"LEFT", "L", "LINKS"})),
-    "fr": ({"FR", "RF", "VR"}, ({"FRONT", "F", "VORNE"}, {"RIGHT", "R", "RECHTS"})),
-    "rl": ({"RL", "LR", "HL"}, ({"REAR", "R", "BACK", "HINTEN"}, {"LEFT", "L", "LINKS"})),
-    "rr": ({"RR", "HR"}, ({"REAR", "R", "BACK", "HINTEN"}, {"RIGHT", "R", "RECHTS"})),
-}
+POSITIONS = {"fl": {"FL", "LF", "VL"}, "fr": {"FR", "RF", "VR"}, "rl": {"RL", "LR", "HL"}, "rr": {"RR", "HR"}}
+AXLE_WORDS = {"F": "f", "FR": "f", "FRT": "f", "FRONT": "f", "VORNE": "f", "RE": "r", "REAR": "r", "BACK": "r",
+              "HINTEN": "r"}
+SIDE_WORDS = {"L": "l", "LH": "l", "LEFT": "l", "LINKS": "l", "R": "r", "RH": "r", "RIGHT": "r", "RECHTS": "r"}
 WHEEL_WORDS = {"WHL", "WHEEL", "SPD", "SPEED", "RADGESCHW", "MOT", "MOTOR", "TQ", "TORQUE"}
 
 
@@ -72,6 +70,11 @@ HINTS = {
 }
 
 
+# the unit taken for a well-named signal whose DBC gives none (it costs a point; init marks it ASSUMED)
+ASSUMED_UNITS = {"angle": "deg", "angular_velocity": "deg/s", "acceleration": "m/s^2", "torque": "N m"}
+WHEEL_SPEED_ASSUMED = "km/h"
+
+
 @dataclass(frozen=True)
 class Candidate:
     """A DBC signal taken for a canonical input, and why."""
@@ -80,9 +83,10 @@ class Candidate:
     message: str
     signal: str
     frame_id: int
-    unit: str
+    unit: str  # the DBC's, or ASSUMED_UNITS' for a signal without one (:attr:`assumed`)
     score: int
     words: tuple  # the name words that pointed to it
+    assumed: bool = False
 
     @property
     def reference(self) -> str:
@@ -102,22 +106,20 @@ def joined_words(words: list) -> set:
 
 
 def wheel_of(words: list) -> str | None:
-    """The wheel a signal name points to (``fl``, ...), if exactly one: a code word (FL, VL, ...), a code joined
-    to a wheel word (WHLFL), or an axle word and a side word (FRONT LEFT)."""
-    found = set()
-    word_set = set(words)
-    for wheel, (codes, (axle, side)) in POSITIONS.items():
-        joined = any(word.endswith(code) and word[:-len(code)] in WHEEL_WORDS for word in words for code in codes)
-        spelled = word_set & (axle - {"R", "F"}) and word_set & (side - {"L", "R"})
-        if word_set & codes or joined or spelled:
-            found.add(wheel)
+    """The wheel a signal name points to (``fl``, ...), if exactly one: an axle word next to a side word
+    (FRONT LEFT, Tesla's FR L, LEFT FRONT), else a code word (FL, VL, ...) or a code joined to a wheel word (WHLFL)."""
+    pairs = {AXLE_WORDS[a] + SIDE_WORDS[b] for a, b in zip(words, words[1:]) if a in AXLE_WORDS and b in SIDE_WORDS}
+    pairs |= {AXLE_WORDS[b] + SIDE_WORDS[a] for a, b in zip(words, words[1:]) if a in SIDE_WORDS and b in AXLE_WORDS}
+    if len(pairs) == 1:
+        return pairs.pop()
+    found = {wheel for wheel, codes in POSITIONS.items()
+             if set(words) & codes or any(word.endswith(code) and word[:-len(code)] in WHEEL_WORDS
+                                          for word in words for code in codes)}
     return found.pop() if len(found) == 1 else None
 
 
 def fits_quantity(canonical: str, unit: str | None) -> bool:
     """Whether a DBC unit measures the canonical input's quantity (wheel speeds: also a linear speed)."""
-    if unit is None:
-        return False
     accepted = UNITS[CANONICAL[canonical]][1]
     return unit in accepted or (canonical.startswith("wheel_speed_") and unit in LINEAR_SPEED_UNITS)
 
@@ -134,25 +136,35 @@ def score(canonical: str, words: list) -> tuple:
     return 2 * len(strong) + len(weak) - len(set(words) & AGAINST - hints.strong - hints.weak), tuple(strong + weak)
 
 
+def assumed_unit(canonical: str) -> str:
+    return WHEEL_SPEED_ASSUMED if canonical.startswith("wheel_speed_") else ASSUMED_UNITS[CANONICAL[canonical]]
+
+
 def candidates(database, keep: int = 3) -> dict:
     """canonical -> its best :class:`Candidate` s in the cantools ``database``, best first, at most ``keep``
-    (inputs without one are left out). Ties go to the shorter name, then the lower frame ID."""
+    (inputs without one are left out). Ties go to the shorter name, then the lower frame ID. A signal named
+    only by its wheel (Subaru's ``Wheel_Speeds.FL``) is judged with its message's name in front."""
     found = {}
     for message in sorted(database.messages, key=lambda m: m.frame_id):
         for signal in message.signals:
             if signal.multiplexer_ids or signal.is_multiplexer or signal.length < 4:
                 continue
-            unit = normal_unit(signal.unit) if signal.unit else None
             words = words_of(signal.name)
             wheel = wheel_of(words)
+            if wheel is not None and len(words) <= 2:
+                words = words_of(message.name) + words
+            unit = normal_unit(signal.unit) if signal.unit else None
             for canonical in HINTS:
                 if canonical[-3:-2] == "_" and canonical[-2:] in WHEELS and canonical[-2:] != wheel:
                     continue  # a per-wheel input takes only a signal naming that wheel
-                if not fits_quantity(canonical, unit):
+                assumed = not signal.unit
+                if not (assumed or fits_quantity(canonical, unit)):
                     continue
                 points, matched = score(canonical, words)
+                points -= assumed
                 if points > 0:
                     found.setdefault(canonical, []).append((-points, len(words), message.frame_id, Candidate(
-                        canonical, message.name, signal.name, message.frame_id, signal.unit, points, matched)))
+                        canonical, message.name, signal.name, message.frame_id,
+                        assumed_unit(canonical) if assumed else signal.unit, points, matched, assumed)))
     return {canonical: [ranked[-1] for ranked in sorted(ranks, key=lambda r: r[:3])[:keep]]
             for canonical, ranks in found.items()}
