@@ -165,3 +165,17 @@ def test_batch_tasks_remember_how_their_log_is_read(two_buses, tmp_path):
     assert "reading" not in plain.inputs()  # results of earlier batches stay complete
     assert chosen.inputs()["reading"] == {"log_format": "log", "log_channel": "can0"}
     assert chosen.inputs() != plain.inputs()  # another channel is estimated again, not taken from the old result
+
+
+def test_the_ford_log_is_read_under_its_own_name_as_under_a_log_suffix(tmp_path):
+    """The real drive as recorded (``.candump``) and as ``.log``: the same frames, decoded the same."""
+    from canest.config import load_config
+
+    ford = ROOT.parent / "shared" / "realdata" / "ford_fusion_2017"
+    log = ford / "acc_on_speed_changing_from_30km_to_80km_per_hour.candump"
+    config = load_config(ROOT / "configs" / "ford_fusion_2017.yaml")
+    renamed = tmp_path / "drive.log"
+    shutil.copy(log, renamed)
+    as_recorded, as_log = run(config, log), run(config, renamed)
+    assert as_recorded == as_log
+    assert as_recorded["frames"] == 41250 == as_recorded["decoded"] + as_recorded["ignored_id"]
