@@ -21,6 +21,7 @@ COMMANDS = {
     "compare": "run several filters on one log and compare accuracy and speed",
     "batch": "replay many logs on a Dask cluster and summarize the fleet",
     "check": "validate config and DBCs, print the resolved signal map",
+    "init": "write a starting config from a DBC (or an opendbc car)",
 }
 
 DESCRIPTION = """canest: online vehicle state estimation on CAN.

@@ -155,16 +155,25 @@ class Task:
     log: Path
     filter: str
     out: Path  # folder of this task's results
+    log_format: str | None = None  # --format, --log-channel: how the log is read (see canest.apps.replay.replay)
+    log_channel: str | None = None
+
+    def reading(self) -> dict:
+        """The replay's keywords for reading the log, those given."""
+        given = {"log_format": self.log_format, "log_channel": self.log_channel}
+        return {key: value for key, value in given.items() if value is not None}
 
     def inputs(self) -> dict:
-        """Fingerprints of the log and of its truth file (None without one)."""
+        """Fingerprints of the log and of its truth file (None without one), and how the log is read if said."""
         truth = truth_for(self.log)
-        return {"log": file_fingerprint(self.log), "truth": file_fingerprint(truth) if truth else None}
+        reading = {"reading": self.reading()} if self.reading() else {}
+        return {"log": file_fingerprint(self.log), "truth": file_fingerprint(truth) if truth else None, **reading}
 
 
-def plan(logs, filters, root: Path, out: Path) -> list:
-    """One task per log and filter; results under OUT/<log relative to root, suffix kept>/<filter>."""
-    tasks = [Task(log, name, out / log.relative_to(root) / name) for log in logs for name in filters]
+def plan(logs, filters, root: Path, out: Path, **reading) -> list:
+    """One task per log and filter; results under OUT/<log relative to root, suffix kept>/<filter>.
+    ``reading``: how every log is read (``log_format``, ``log_channel``)."""
+    tasks = [Task(log, name, out / log.relative_to(root) / name, **reading) for log in logs for name in filters]
     clash = next((task for task in tasks if task.out.parent.is_file()), None)
     if clash is not None:  # OUT is the logs' own folder: OUT/a.log/ckf would be inside the log a.log
         raise UsageError(f"--out {out}: the results of {clash.log} would go into {clash.out.parent}, which is a "
@@ -206,7 +215,8 @@ def run_task(config: Config, task: Task, config_fingerprint: str) -> dict:
     for stale in (SUMMARY, ESTIMATES):  # a folder holds a complete result or none
         (task.out / stale).unlink(missing_ok=True)
     with replacing(task.out / ESTIMATES) as partial:
-        frames = replay(with_filter(config, task.filter), task.log, out_csv=partial, progress=False)
+        frames = replay(with_filter(config, task.filter), task.log, out_csv=partial, progress=False,
+                        **task.reading())
         table = read_table(partial)
         valid = table["valid"].astype(int)
         all_states = sum(1 << VALID_BITS.index(s) for s in STATES)
@@ -396,14 +406,16 @@ def discard_partial(tasks) -> None:
 
 def run_batch(config: Config, patterns, out: Path, filters, scheduler=None, workers=None, retries: int = 1,
               progress: bool = True, report=print, stop: Stop = None,
-              connect_timeout: float = CONNECT_TIMEOUT_S) -> list:
+              connect_timeout: float = CONNECT_TIMEOUT_S, **reading) -> list:
     """Run every (log, filter) task not already complete; return one summary row per task.
+
+    ``reading``: how every log is read (``log_format``, ``log_channel``: see :func:`canest.apps.replay.replay`).
 
     ``stop`` (a :class:`Stop`) ends the batch early and in order; the fleet summary is written in any case.
     """
     stop = stop or Stop()
     out = Path(out)
-    tasks = plan(find_logs(patterns, out), filters, input_root(patterns), out)
+    tasks = plan(find_logs(patterns, out), filters, input_root(patterns), out, **reading)
     config_fingerprint = fingerprint(config)
     finished = {task: complete(task, config_fingerprint) for task in tasks}
     rows = [row for row in finished.values() if row is not None]

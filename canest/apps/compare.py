@@ -45,7 +45,8 @@ def with_filter(config: Config, name: str) -> Config:
     return dataclasses.replace(config, estimator=est)
 
 
-def run_filter(config: Config, log_path, truth: dict, name: str, skip: float = 0.5) -> FilterRun:
+def run_filter(config: Config, log_path, truth: dict, name: str, skip: float = 0.5, **reading) -> FilterRun:
+    """One filter's replay of the log (``reading``: how, see :func:`canest.apps.replay.replay`), scored."""
     estimates = []
     step_times = []
 
@@ -53,7 +54,7 @@ def run_filter(config: Config, log_path, truth: dict, name: str, skip: float = 0
         estimates.append(estimate)
 
     config = with_filter(config, name) if name != config.estimator.filter else config
-    repairs = replay(config, log_path, progress=False, on_estimate=collect, step_times=step_times)["repairs"]
+    repairs = replay(config, log_path, progress=False, on_estimate=collect, step_times=step_times, **reading)["repairs"]
     table = {"t": np.array([e.t for e in estimates]), "valid": np.array([e.valid_flags for e in estimates])}
     for state in estimates[-1].values:
         table[state] = np.array([e.values[state] for e in estimates])

@@ -36,10 +36,11 @@ def progress_bar(source, desc: str, progress: bool):
 
 
 def replay(config: Config, log_path, out_log=None, out_csv=None, progress: bool = True, on_estimate=None,
-           step_times=None, stop=None, log_format=None) -> dict:
+           step_times=None, stop=None, log_format=None, log_channel=None) -> dict:
     """Run a log through the pipeline as fast as possible; return the frame summary.
 
-    ``log_path`` ``-`` reads standard input as it arrives (``log_format``: see :class:`canest.io.logfiles.LogSource`);
+    ``log_path`` ``-`` reads standard input as it arrives (``log_format``, ``log_channel``: see
+    :class:`canest.io.logfiles.LogSource`);
     ``out_log`` or ``out_csv`` ``-`` writes standard output.
 
     ``step_times``, a list, receives the seconds of every filter predict + update. ``stop``, anything with
@@ -48,7 +49,7 @@ def replay(config: Config, log_path, out_log=None, out_csv=None, progress: bool 
     """
     pipeline = Pipeline(config, output_channel=config.output_bus.channel)
     pipeline.estimator.step_times = step_times
-    source = open_log(log_path, log_format)
+    source = open_log(log_path, log_format, log_channel)
     frames = iter(source)
     stopped = False
     try:
@@ -75,15 +76,16 @@ def replay(config: Config, log_path, out_log=None, out_csv=None, progress: bool 
         source.stop()
     for warning in source.warnings():
         LOG.warning(warning)
-    return {"frames": 0, **pipeline.summary(), **source.damage.summary(), **({"stopped": 1} if stopped else {})}
+    return {"frames": 0, **pipeline.summary(), **source.summary(), **({"stopped": 1} if stopped else {})}
 
 
-def play(log_path, bus: can.BusABC, speed: float = 1.0, progress: bool = True, log_format=None) -> int:
+def play(log_path, bus: can.BusABC, speed: float = 1.0, progress: bool = True, log_format=None,
+         log_channel=None) -> int:
     """Send a log's frames onto ``bus`` at their recorded timing (like canplayer); return frames sent.
 
     A frame without a finite timestamp has no place in time and is not sent; those and what could not be read
     are warned about (logger ``canest.replay``)."""
-    reader = open_log(log_path, log_format)
+    reader = open_log(log_path, log_format, log_channel)
     try:
         timed = (msg for msg in reader if math.isfinite(msg.timestamp))
         sent = play_messages(timed, bus, speed, progress and sys.stderr.isatty(), desc=f"play {reader.path.name}")

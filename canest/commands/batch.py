@@ -7,7 +7,7 @@ from contextlib import contextmanager
 from pathlib import Path
 
 from canest.apps.batch import CONNECT_TIMEOUT_S, FLEET_SUMMARY, Stop, fleet_table, plot_errors, run_batch
-from canest.commands.common import FORMATTER, add_config, config_from_args
+from canest.commands.common import FORMATTER, add_config, add_log_reading, config_from_args, log_reading
 from canest.apps.compare import parse_filters
 from canest.errors import DependencyError
 
@@ -37,6 +37,7 @@ def register(subparsers) -> None:
                               description=__doc__, epilog=EPILOG, formatter_class=FORMATTER)
     p.add_argument("logs", nargs="+", help="glob pattern(s) of logs; quote them, '**' recurses")
     add_config(p)
+    add_log_reading(p)
     p.add_argument("--out", "-o", required=True, help="results folder")
     p.add_argument("--filters", default=None, help="comma-separated filters to sweep (default: the config's)")
     p.add_argument("--scheduler", help="address of a running Dask scheduler, e.g. tcp://host:8786")
@@ -74,7 +75,8 @@ def run(args) -> int:
     stop = Stop()
     with stop_on_signals(stop):
         rows = run_batch(config, args.logs, Path(args.out), filters, args.scheduler, args.workers, args.retries,
-                         progress=not args.quiet, stop=stop, connect_timeout=args.connect_timeout)
+                         progress=not args.quiet, stop=stop, connect_timeout=args.connect_timeout,
+                         **log_reading(args))
     elapsed = time.perf_counter() - started
     print(fleet_table(rows))
     ran = [r for r in rows if r["status"] == "ok"]

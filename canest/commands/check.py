@@ -4,9 +4,12 @@ from __future__ import annotations
 from canest.commands.common import FORMATTER, add_config, config_from_args
 from canest.codec.decode import InputDecoder
 from canest.codec.encode import EstimateEncoder
+from canest.estimation.catalog import losses
 from canest.signals import si_unit
 
 EPILOG = """Every error names the file, the line and the key, message or signal.
+Inputs the config does not map are listed with what each costs: the models
+and filters of the catalog that need it, and the states not estimated then.
 Exit status 0 when the config is usable, 2 when it is not."""
 
 
@@ -79,5 +82,9 @@ def run(args) -> int:
     for message, problem in config.tolerated.items():
         print(f"tolerated in the input DBC ({f'no signal is taken from {message}' if message else 'lenient load'}): "
               f"{problem}")
+    missing = losses(config.signals)
+    if missing:
+        print("\ninputs not mapped, and what they cost:")
+        print("\n".join(f"  {line}" for line in missing))
     print("\nOK")
     return 0

@@ -70,6 +70,23 @@ def add_config(parser, short_option: bool = True) -> None:
         parser.add_argument("-c", action=LegacyConfig, dest="config", help=argparse.SUPPRESS)
 
 
+def add_log_reading(parser) -> None:
+    """--format and --log-channel: how a log is read where its name and content do not settle it."""
+    from canest.io.logfiles import STREAM_FORMATS
+
+    parser.add_argument("--format", "-f", choices=STREAM_FORMATS,
+                        help="format of the log (log = candump -L); by default its suffix says it, else its first "
+                             "lines do (standard input: log)")
+    parser.add_argument("--log-channel", metavar="NAME",
+                        help="read only this channel of a log of several buses, as the log names it (can0; ASC "
+                             "and BLF count from 0); the other channels' frames are counted as log_other_channel")
+
+
+def log_reading(args) -> dict:
+    """The keywords of :func:`canest.apps.replay.replay` that --format and --log-channel give."""
+    return {"log_format": args.format, "log_channel": args.log_channel}
+
+
 def add_bus_overrides(parser, title: str = "buses (override the config and python-can's configuration)",
                       output: bool = True) -> None:
     """-i, -c, -b, --fd, --bus-kwargs (and the output bus's interface and channel when ``output``)."""

@@ -1,7 +1,7 @@
 """canest compare: every filter on the same log, scored against truth, timed."""
 from __future__ import annotations
 
-from canest.commands.common import FORMATTER, add_config, config_from_args
+from canest.commands.common import FORMATTER, add_config, add_log_reading, config_from_args, log_reading
 from canest.apps.compare import format_comparison, parse_filters, plot_comparison, run_filter
 from canest.apps.evaluate import read_table
 from canest.errors import DependencyError
@@ -19,9 +19,10 @@ the median wall time of one predict + update on this machine."""
 def register(subparsers) -> None:
     p = subparsers.add_parser("compare", help="run several filters on one log and compare accuracy and speed",
                               description=__doc__, epilog=EPILOG, formatter_class=FORMATTER)
-    p.add_argument("log", help="input log (any format python-can reads)")
+    p.add_argument("log", help="input log (any format python-can reads, or one its first lines show)")
     p.add_argument("truth", help="truth CSV from canest simulate")
     add_config(p)
+    add_log_reading(p)
     p.add_argument("--filters", default="all", help="'all' or a comma-separated list (default all)")
     p.add_argument("--skip", type=float, default=0.5, help="seconds at the start to leave out (default 0.5)")
     p.add_argument("--plot", help="PNG with estimate vs truth and the errors of every filter")
@@ -36,7 +37,7 @@ def run(args) -> int:
     truth = read_table(args.truth)
     runs = []
     for name in names:
-        runs.append(run_filter(config, args.log, truth, name, args.skip))
+        runs.append(run_filter(config, args.log, truth, name, args.skip, **log_reading(args)))
         print(f"  {name}: done", flush=True)
     print(format_comparison(runs, f"{args.log} ({config.vehicle.name})"))
     repaired = [f"{r.name} ({r.repairs})" for r in runs if r.repairs]

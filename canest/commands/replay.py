@@ -12,9 +12,8 @@ from contextlib import contextmanager
 from canest.config import DEFAULT_CONFIG
 from canest.errors import UsageError
 from canest.io.bus import open_bus
-from canest.io.logfiles import STREAM_FORMATS
 from canest.io.outputs import check_outputs, is_stdio
-from canest.commands.common import FORMATTER, add_bus_overrides, add_config, config_from_args
+from canest.commands.common import FORMATTER, add_bus_overrides, add_config, add_log_reading, config_from_args, log_reading
 from canest.pipeline import format_summary
 from canest.apps.replay import play, replay
 
@@ -40,6 +39,12 @@ the model's forces and frictions, their _std columns, valid (bit mask: 0 vx,
 7-14 per-wheel forces and frictions), mode and why_vx, why_yaw_rate,
 why_beta, why_forces, why_friction (why a bit is clear).
 
+A log whose suffix names no format (.candump, .txt, none) is read in the
+format its first lines show (candump -L, ASC, TRC, python-can CSV, BLF);
+--format overrides. A log of several buses mixes them unless --log-channel
+selects one: the others' frames are counted (log_other_channel), and a log
+of several channels read as one gets a warning listing them.
+
 Damaged logs: a line python-can cannot parse is skipped and counted
 (log_bad_lines, log_torn_line for a last line cut mid-write, log_junk_lines
 in ASC), a truncated or corrupt BLF is read up to the damage (log_truncated,
@@ -61,11 +66,10 @@ no outputs)."""
 def register(subparsers) -> None:
     p = subparsers.add_parser("replay", help="run a CAN log through the estimator, or play it onto a bus",
                               description=__doc__, epilog=EPILOG, formatter_class=FORMATTER)
-    p.add_argument("log", help="input log: .log (candump), .asc, .blf, .trc, .csv, .mf4, ... (any python-can reads); "
-                               "- for standard input")
+    p.add_argument("log", help="input log: .log (candump), .asc, .blf, .trc, .csv, .mf4, ... (any python-can reads; "
+                               "another suffix or none: the format its first lines show); - for standard input")
     add_config(p, short_option=False)
-    p.add_argument("--format", "-f", choices=STREAM_FORMATS,
-                   help="format of the log where its name does not say it (standard input: default log, candump -L)")
+    add_log_reading(p)
     p.add_argument("--out", "-o", help="write the estimate frames to this log (format by suffix; - for candump text "
                                        "on standard output)")
     p.add_argument("--csv", help="write one row per tick to this CSV (- for standard output)")
@@ -143,7 +147,7 @@ def run(args) -> int:
             raise UsageError("--realtime plays the log onto a bus; --out and --csv belong to offline replay")
         bus = open_bus(config.input_bus.kwargs(), "playback")
         try:
-            sent = play(args.log, bus, speed=rate, progress=not args.quiet, log_format=args.format)
+            sent = play(args.log, bus, speed=rate, progress=not args.quiet, **log_reading(args))
         finally:
             bus.shutdown()
         print(f"sent {sent} frames to {config.input_bus.interface}:{config.input_bus.channel}")
@@ -155,7 +159,7 @@ def run(args) -> int:
                    "the input DBC": config.input_dbc, "the output DBC": config.output_dbc})
     with StopRequest().on_signals() as stop:
         summary = replay(config, args.log, out_log=args.out, out_csv=args.csv, progress=not args.quiet, stop=stop,
-                         log_format=args.format)
+                         **log_reading(args))
     report = sys.stderr if is_stdio(args.out) or is_stdio(args.csv) else sys.stdout
     print(json.dumps(summary, sort_keys=True) if args.json else format_summary(summary), file=report)
     if stop.is_set():

@@ -23,6 +23,7 @@ from canest.filters import FILTERS, fits
 from canest.models.single_track import SingleTrackModel
 from canest.models.tire_force import TireForceModel
 from canest.models.two_track import TwoTrackModel
+from canest.estimation.estimate import OUTPUT_STATES
 from canest.signals import INPUT_GROUPS, WHEELS
 
 BASE_INPUTS = ("steering_wheel_angle", "ax", "ay", "yaw_rate", *(f"wheel_speed_{w}" for w in WHEELS))
@@ -82,6 +83,35 @@ def misfit(filter_name: str, model: str) -> str | None:
     models = [name for name, other in CATALOG.items() if fits(filter_name, other.model)]
     return (f"filter '{filter_name}' and model '{model}' do not fit: use model '{models[0]}' "
             f"(filter '{filter_name}' runs on {', '.join(models)})")
+
+
+def states_of(entry: ModelEntry) -> tuple:
+    """The states a model publishes: the output states and those its binding adds (forces, frictions)."""
+    return OUTPUT_STATES + tuple(entry.estimator.extra_states)
+
+
+def losses(mapped) -> list:
+    """What each input group not (fully) in ``mapped`` costs, one line per group: the models and filters of the
+    catalog that need it and the states that are then not estimated (none lost: an empty list)."""
+    lines = []
+    for group, inputs in INPUT_GROUPS.items():
+        missing = [name for name in inputs if name not in mapped]
+        if not missing:
+            continue
+        models = [name for name, entry in CATALOG.items() if set(missing) & set(entry.required_inputs)]
+        filters = sorted({(filter_name, name) for name, entry in CATALOG.items() if name not in models
+                          for filter_name in entry.filters if set(missing) & set(entry.inputs_for(filter_name))})
+        left = [CATALOG[name] for name in CATALOG if name not in models]
+        lost = list(dict.fromkeys(state for name in models for state in states_of(CATALOG[name])
+                                  if not any(state in states_of(entry) for entry in left)))
+        costs = []
+        if models:
+            costs.append(("no model runs" if not left else f"model {', '.join(models)} unavailable"))
+        if filters:
+            costs.append(f"filter {', '.join(f'{f} (on {m})' for f, m in filters)} unavailable")
+        costs.append(f"{', '.join(lost)} not estimated" if lost else "every state still estimated")
+        lines.append(f"no {group} ({', '.join(missing)}): {'; '.join(costs)}")
+    return lines
 
 
 def make_estimator(config):

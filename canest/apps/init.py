@@ -1,0 +1,186 @@
+"""A starting config from a DBC (a file or one of opendbc's) and, for a car opendbc describes, its parameters.
+
+:func:`starting_config` finds the usual inputs in the DBC
+(:mod:`canest.config.discover`), lists each choice and its runners-up in
+YAML comments for the user to confirm, takes the vehicle block from
+opendbc's car parameters where a car is named (each number's source in a
+comment) and from canest's built-in config for the rest, and loads the result
+as ``canest check`` would before anything is written. A DBC that lacks an
+input every model needs is a :class:`~canest.errors.DbcError` naming those
+inputs and what they cost; nothing is written then. :func:`write_new` never
+replaces a file.
+"""
+from __future__ import annotations
+
+import os
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+
+from canest.config import DEFAULT_CONFIG, load_config
+from canest.config.discover import candidates
+from canest.config.opendbc_cars import CAR_SOURCES, PREFIX, car_parameters, dbc_text
+from canest.errors import ConfigError, DbcError, InputFileError, OutputFileError
+from canest.estimation.catalog import BASE_INPUTS, losses
+from canest.io.outputs import OutputFile, is_stdio, open_stdout
+from canest.limits import VEHICLE
+from canest.signals import INPUT_GROUPS, LINEAR_SPEED_UNITS, normal_unit
+
+ORDER = (*BASE_INPUTS, *INPUT_GROUPS["motor_torques"])  # the inputs init looks for, in the config's order
+
+
+@dataclass(frozen=True)
+class DbcSource:
+    """A DBC's text, what the config's ``input.dbc`` says for it, and how messages name it."""
+
+    text: str
+    reference: str
+    label: str
+
+
+def dbc_source(given: str, out) -> DbcSource:
+    """``opendbc:NAME`` or a DBC path; a path is written relative to the config's folder (absolute for stdout)."""
+    if given.startswith(PREFIX):
+        return DbcSource(dbc_text(given[len(PREFIX):]), given, given)
+    path = Path(given)
+    try:
+        text = path.read_text(encoding="utf-8", errors="replace")
+    except FileNotFoundError:
+        raise InputFileError(f"{path}: DBC file not found") from None
+    except IsADirectoryError:
+        raise InputFileError(f"{path}: that is a folder; name a DBC file") from None
+    except OSError as exc:
+        raise InputFileError(f"{path}: cannot read: {exc.strerror}; check that this user may read it") from None
+    folder = Path.cwd() if is_stdio(out) or out is None else Path(out).resolve().parent
+    inside = path.resolve().is_relative_to(folder)  # beside the config: a relative path moves with both
+    return DbcSource(text, os.path.relpath(path.resolve(), folder) if inside else str(path.resolve()), str(path))
+
+
+def parse_dbc(source: DbcSource):
+    """The DBC's cantools database, read leniently (canest's loader judges it again when the config loads)."""
+    import cantools
+
+    try:
+        return cantools.database.load_string(source.text, database_format="dbc", strict=False)
+    except Exception as exc:  # cantools raises several parser exception types
+        reason = " ".join(str(exc).split())
+        raise DbcError(f"{source.label}: cannot load DBC: {reason[:300]}; fix the DBC or name another") from None
+
+
+def _number(value: float) -> str:
+    return f"{value:.6g}" if abs(value) < 1e5 else f"{value:.1f}"
+
+
+def vehicle_lines(name: str, car: str | None) -> list:
+    """The ``vehicle:`` block: opendbc's numbers for ``car`` (each with its source), canest's defaults otherwise."""
+    defaults = load_config(DEFAULT_CONFIG).vehicle
+    known = car_parameters(car) if car else {}
+    lines = ["vehicle:", f"  name: {name}"]
+    for key in VEHICLE:
+        if key in known:
+            lines.append(f"  {key}: {_number(known[key])}    # opendbc {car}: {CAR_SOURCES[key]}")
+        else:
+            lines.append(f"  {key}: {_number(getattr(defaults, key))}    # canest's default (built-in "
+                         f"{DEFAULT_CONFIG.name}): measure or look up yours")
+    return lines
+
+
+def signal_lines(found: dict) -> list:
+    """``input.signals`` entries, each with why it was taken and the runners-up, for the user to confirm."""
+    lines = []
+    for canonical in ORDER:
+        if canonical not in found:
+            continue
+        best, *others = found[canonical]
+        notes = [f"ASSUMED unit {best.unit}: the DBC gives none" if best.assumed else f"unit {best.unit}"]
+        if canonical.startswith("wheel_speed_") and normal_unit(best.unit) in LINEAR_SPEED_UNITS:
+            notes.append("a linear speed: rad/s through vehicle.wheel_radius")
+        if others:
+            notes.append("else: " + ", ".join(o.reference for o in others))
+        entry = f"{{signal: {best.reference}, unit: {best.unit}}}" if best.assumed else best.reference
+        lines.append(f"    {canonical}: {entry}    # CONFIRM: {'; '.join(notes)}")
+    return lines
+
+
+def config_text(source: DbcSource, found: dict, name: str, car: str | None) -> str:
+    header = [
+        f"# A starting config written by `canest init` from {source.label}"
+        + (f" and opendbc's car {car}" if car else "") + ".",
+        "# Every input below was found by its name and unit: CONFIRM each (right signal, sign: ISO 8855, a left turn",
+        "# and a left yaw positive; `sign: -1` flips one), then run `canest check --config THIS` and replay a log.",
+        "# If replay rejects a message's frames (rejected_fd_mismatch: the DBC declares CAN FD, the car sends",
+        "# classic), add under input: `messages: {MESSAGE: {fd: false}}`. README \"Your car\" walks through it.",
+    ]
+    missing = losses(set(found))
+    if missing:
+        header += ["# Inputs not found, and what they cost:"] + [f"#   {line}" for line in missing]
+    body = [
+        "", *vehicle_lines(name, car), "",
+        "input:", f"  dbc: {source.reference}", "  bus: {interface: socketcan, channel: can0}", "  signals:",
+        *signal_lines(found), "",
+        "output:", "  dbc: builtin:canest_estimates.dbc", "  bus: {interface: socketcan, channel: can1}", "",
+        "estimator:", "  filter: ckf", "  rate_hz: 100",
+    ]
+    return "\n".join(header + body) + "\n"
+
+
+def lacking(source: DbcSource, found: dict) -> None:
+    """A DbcError naming the inputs every model needs that the DBC lacks (None if it has them all)."""
+    missing = [name for name in BASE_INPUTS if name not in found]
+    if missing:
+        costs = [line for line in losses(set(found)) if any(f"{name}," in line or f"{name})" in line
+                                                             for name in missing)]
+        raise DbcError(f"{source.label}: no signal found for {', '.join(missing)} ({'; '.join(costs)}); "
+                       "a signal of another name or unit can be mapped by hand in input.signals (README "
+                       "\"Your car\"); nothing written")
+
+
+def validated(text: str, source: DbcSource) -> None:
+    """Load ``text`` as ``canest check`` does, in a scratch folder holding the DBC; any error names the DBC."""
+    with tempfile.TemporaryDirectory(prefix="canest-init-") as folder:
+        dbc = Path(folder) / "input.dbc"
+        dbc.write_text(source.text, encoding="utf-8")
+        config = Path(folder) / "config.yaml"
+        config.write_text(text.replace(f"  dbc: {source.reference}\n", f"  dbc: {dbc}\n", 1), encoding="utf-8")
+        try:
+            load_config(config)
+        except ConfigError as exc:
+            reason = str(exc).replace(str(config), "the config").replace(f"{dbc}: ", "")
+            raise type(exc)(f"{source.label}: the config init would write does not load: {reason}") from None
+
+
+def starting_config(given_dbc: str | None, car: str | None = None, out=None) -> tuple:
+    """(the config's text, the inputs found) for the DBC ``given_dbc`` (or ``car``'s own when None)."""
+    params_dbc = car_parameters(car)["dbc"] if car and given_dbc is None else None
+    source = dbc_source(given_dbc or f"{PREFIX}{params_dbc}", out)
+    found = candidates(parse_dbc(source))
+    lacking(source, found)
+    name = (car or Path(source.label.removeprefix(PREFIX)).stem).lower().replace("_", "-")
+    text = config_text(source, found, name, car)
+    validated(text, source)
+    return text, found
+
+
+def write_new(path, text: str) -> None:
+    """``text`` into a new file ``path`` (``-``: standard output); an existing file is never replaced.
+
+    Staged beside the name and linked under it, which fails if the name exists (no race with another writer)."""
+    if is_stdio(path):
+        with open_stdout() as handle:
+            handle.write(text)
+        return
+    if os.path.lexists(path):
+        raise OutputFileError(f"{path}: exists; init never replaces a file: choose another --out or move it away")
+    output = OutputFile(path)
+    try:
+        with open(output.write_path, "w", encoding="utf-8") as handle:
+            handle.write(text)
+        os.link(output.write_path, output.target)
+    except FileExistsError:
+        raise OutputFileError(f"{path}: exists; init never replaces a file: choose another --out or move it "
+                              "away") from None
+    except OSError as exc:
+        raise output.error(exc) from None
+    finally:
+        output.discard()
+
