@@ -4,6 +4,7 @@ from __future__ import annotations
 from canest.commands.common import FORMATTER, add_config, config_from_args
 from canest.codec.decode import InputDecoder
 from canest.codec.encode import EstimateEncoder
+from canest.codec.reach import input_shortfalls, output_shortfalls
 from canest.estimation.catalog import losses
 from canest.signals import si_unit
 
@@ -56,7 +57,7 @@ def _checks(checks) -> list:
 def run(args) -> int:
     config = config_from_args(args)
     decoder = InputDecoder(config)
-    EstimateEncoder(config.output_dbc)
+    encoder = EstimateEncoder(config.output_dbc)
     timeouts = decoder.timeouts(config.estimator.timeout_cycles)
     v = config.vehicle
     print(f"config   {config.path}")
@@ -86,5 +87,9 @@ def run(args) -> int:
     if missing:
         print("\ninputs not mapped, and what they cost:")
         print("\n".join(f"  {line}" for line in missing))
+    shortfalls = input_shortfalls(config.signals) + output_shortfalls(encoder.database)
+    if shortfalls:
+        print("\nwarning: signal ranges short of what cars reach:")
+        print("\n".join(f"  {line}" for line in shortfalls))
     print("\nOK")
     return 0

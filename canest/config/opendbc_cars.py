@@ -8,20 +8,15 @@ memory (``opendbc.get_generated_dbcs()``, names ending ``_generated``); only
 of gravity, steering ratio, axle cornering stiffnesses, yaw inertia), which
 need ``opendbc.car`` (numpy and pycapnp).
 
-Note for joining with ``canest.codec.opendbc_dbcs`` (the ``input.dbc: opendbc:NAME``
-loader built alongside): :func:`dbc_text` answers the same names; once both are
-on one branch, init may take its text from there and this module keep only the
-car parameters.
+The DBCs themselves come from :mod:`canest.codec.opendbc_dbcs`, the loader of
+``input.dbc: opendbc:NAME``.
 """
 from __future__ import annotations
 
 import difflib
-import os
 
+from canest.codec.opendbc_dbcs import INSTALL, PREFIX, closest_names, opendbc_names, opendbc_path
 from canest.errors import DependencyError, UsageError
-
-PREFIX = "opendbc:"
-INSTALL = "pip install 'canest[opendbc]' (opendbc needs Python 3.11 or 3.12)"
 
 
 def _closest(name: str, names) -> str:
@@ -31,22 +26,15 @@ def _closest(name: str, names) -> str:
 
 def dbc_names() -> list:
     """Every DBC name opendbc ships, files and generated, sorted."""
-    opendbc = DependencyError.require("opendbc", "opendbc's DBCs", INSTALL)
-    static = (f[:-4] for f in os.listdir(opendbc.DBC_PATH) if f.endswith(".dbc"))
-    return sorted({*static, *opendbc.get_generated_dbcs()})
+    return opendbc_names("opendbc's DBCs")
 
 
 def dbc_text(name: str) -> str:
     """The text of opendbc's DBC ``name``; a UsageError naming the closest names if opendbc has none."""
-    opendbc = DependencyError.require("opendbc", f"{PREFIX}{name}", INSTALL)
-    generated = opendbc.get_generated_dbcs().get(name)
-    if generated is not None:
-        return generated
-    path = os.path.join(opendbc.DBC_PATH, f"{name}.dbc")
-    if not os.path.isfile(path):
-        raise UsageError(f"--dbc {PREFIX}{name}: opendbc has no DBC of that name ({_closest(name, dbc_names())})")
-    with open(path, encoding="utf-8", errors="replace") as handle:
-        return handle.read()
+    path = opendbc_path(name, f"{PREFIX}{name}")
+    if path is None:
+        raise UsageError(f"--dbc {PREFIX}{name}: opendbc has no DBC of that name ({closest_names(name, PREFIX + name)})")
+    return path.read_text(encoding="utf-8", errors="replace")
 
 
 def _car_modules(feature: str):
