@@ -30,10 +30,12 @@ class Pipeline:
         self.clock = TickClock(1.0 / config.estimator.rate_hz)
         self.counts = Counter()
         self.last_time = None
+        self.ticked = 0  # ticks run: the drive's length for the reset rate
 
     def _ticks(self, t: float) -> list:
         jumps = self.clock.jumps
         estimates = [self.estimator.step(self.resampler.sample(tick)) for tick in self.clock.due(t)]
+        self.ticked += len(estimates)
         if self.clock.jumps != jumps:
             self.counts["time_jumps"] += 1
             self.estimator.reset()
@@ -61,7 +63,11 @@ class Pipeline:
     def summary(self) -> dict:
         """Every frame accounted for: decoded, ignored by ID, rejected by cause; and timing events."""
         repairs = self.estimator.filter.repairs if self.estimator.filter is not None else 0
-        return {**self.decoder.counts, **self.counts, "resets": self.estimator.resets, "repairs": repairs}
+        summary = {**self.decoder.counts, **self.counts, "resets": self.estimator.resets, "repairs": repairs}
+        hours = self.ticked * self.clock.dt / 3600.0
+        if self.estimator.resets and hours:
+            summary["resets_per_hour"] = round(self.estimator.resets / hours, 1)  # divergence resets, per hour driven
+        return summary
 
 
 def format_summary(summary: dict) -> str:

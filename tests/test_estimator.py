@@ -123,6 +123,8 @@ def test_divergence_resets_the_filter_and_marks_sideslip_invalid(config):
     pipeline = Pipeline(config)
     estimates = [e for frame in sim.frames for e in pipeline.feed(frame)]
     assert pipeline.estimator.resets >= 1
+    hours = len(estimates) / config.estimator.rate_hz / 3600.0
+    assert pipeline.summary()["resets_per_hour"] == round(pipeline.estimator.resets / hours, 1)
     spinning = np.interp([e.t for e in estimates], sim.truth["t"], np.abs(sim.truth["beta"])) > np.radians(10)
     valid_beta = np.array([e.valid["beta"] if e.valid else False for e in estimates])
     assert spinning.any()
@@ -135,4 +137,4 @@ def test_a_consistent_run_never_resets(config, dlc_run):
     pipeline = Pipeline(config)
     for frame in sim.frames:
         pipeline.feed(frame)
-    assert pipeline.estimator.resets == 0
+    assert pipeline.estimator.resets == 0 and "resets_per_hour" not in pipeline.summary()
