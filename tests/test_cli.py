@@ -1,4 +1,5 @@
 """The canest command as a user runs it."""
+import json
 import subprocess
 import sys
 
@@ -8,7 +9,7 @@ import numpy as np
 import pytest
 
 from canest.apps.evaluate import read_table
-from tests.conftest import ROOT
+from tests.conftest import CONFIG, ROOT
 
 CANEST = [sys.executable, "-m", "canest"]
 
@@ -73,23 +74,38 @@ def test_run_on_a_bus_that_does_not_exist_fails_cleanly():
 
 def test_compare_every_filter_on_one_log(dlc_run, tmp_path):
     log, truth, _ = dlc_run
-    out = canest("compare", log, truth, "--filters", "all", "--plot", tmp_path / "compare.png").stdout
+    result = canest("compare", log, truth, "--filters", "all", "--plot", tmp_path / "compare.png", "--json")
     from canest.filters import FILTERS
 
-    header = next(line for line in out.splitlines() if line.startswith("filter")).split("|")
-    column = {cell.split()[0]: i for i, cell in enumerate(header)}
-    table = [line for line in out.splitlines() if "|" in line and not line.startswith("filter")]
-    assert [line.split("|")[0].strip() for line in table] == list(FILTERS)
-    for line in table:
-        cells = line.split("|")
-        vx_rmse, yaw_rmse, beta_rmse = (float(cells[column[s]].split()[0]) for s in ("vx", "yaw_rate", "beta"))
-        assert vx_rmse < 0.1 and yaw_rmse < 0.3 and beta_rmse < 0.5, line
-        assert float(cells[-1]) > 0
-    rows = {line.split("|")[0].strip(): line.split("|") for line in table}
-    assert float(rows["dici-gfckf"][column["fy_fl"]].split()[0]) < 200  # forces scored where estimated
-    assert rows["ckf"][column["fy_fl"]].strip() == "-"
-    assert rows["dckf"][column["mu_fl"]].strip() != "-"
+    runs = {run["filter"]: run for run in json.loads(result.stdout)}
+    assert list(runs) == list(FILTERS) and "ckf: done" in result.stderr
+    for name, run in runs.items():
+        rmse = {state: run["scores"][state]["rmse"] for state in ("vx", "yaw_rate", "beta")}
+        assert rmse["vx"] < 0.1 and rmse["yaw_rate"] < 0.3 and rmse["beta"] < 0.5, (name, rmse)
+        assert run["cpu_us_per_step"] > 0
+    assert runs["dici-gfckf"]["scores"]["fy_fl"]["rmse"] < 200  # forces scored where estimated
+    assert "fy_fl" not in runs["ckf"]["scores"] and "mu_fl" in runs["dckf"]["scores"]
     assert (tmp_path / "compare.png").stat().st_size > 20000
+
+
+def test_compare_table_fits_a_terminal(dlc_run):
+    from canest.apps.compare import format_comparison, run_filter
+    from canest.apps.evaluate import read_table
+    from canest.config import load_config
+
+    log, truth, _ = dlc_run
+    runs = [run_filter(load_config(CONFIG), log, read_table(truth), name) for name in ("ckf", "dckf", "dici-gfckf")]
+    table = format_comparison(runs, "title")
+    blocks = table.split("\n\n")
+    assert len(blocks) > 1 and all(len(line) <= 120 for line in table.splitlines())
+    for block in blocks:
+        rows = [line.split("|")[0].strip() for line in block.splitlines() if "|" in line]
+        assert rows == ["filter", "ckf", "dckf", "dici-gfckf"]
+    assert "CPU us/step" in blocks[0] and "us/step" not in blocks[1]
+    forces = next(block for block in blocks if "fy_fl" in block.splitlines()[0 if block.startswith("filter") else 1])
+    ckf_cells = next(line for line in forces.splitlines() if line.startswith("ckf")).split("|")[1:]
+    assert all(cell.strip() == "-" for cell in ckf_cells)  # states a filter does not estimate show '-'
+    assert next(line for line in blocks[0].splitlines() if line.startswith("ckf")).split("|")[-1].strip() != "-"
 
 
 def test_compare_rejects_unknown_filter(dlc_run):

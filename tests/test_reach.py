@@ -1,5 +1,6 @@
 """`canest check` warns where a mapped signal's range cannot carry what cars reach (wheel speed to 300 km/h at a
 0.35 m radius, yaw rate +-180 deg/s; published vx 90 m/s, sideslip +-30 deg), and is silent where it can."""
+import json
 import re
 
 from canest.codec.reach import input_shortfalls, output_shortfalls
@@ -30,6 +31,14 @@ def test_a_1600_rpm_wheel_speed_and_a_125_deg_s_gyro_are_named(tmp_path):
     assert "input yaw_rate (ESC_IMU.YawRate) carries [-125, 125] deg/s; cars reach [-180, 180] deg/s" in warned
     assert "wheel_speed_rl" not in warned  # the rear wheels keep 3200 rpm
     assert out.rstrip().endswith("OK")  # a warning, not a refusal
+    report = json.loads(canest("check", "--config", tmp_path / "car.yaml", "--json").stdout)
+    assert report["ok"] and report["range_warnings"] == [line.strip() for line in warned.strip().splitlines()[:3]]
+    table_rows = [line for line in out.splitlines() if line.split(" ")[0] in report_canonicals(report)]
+    assert len(report["signals"]) == len(table_rows) == 8  # steering, four wheels, ax, ay, yaw rate
+
+
+def report_canonicals(report) -> set:
+    return {row["canonical"] for row in report["signals"]}
 
 
 def test_a_narrow_output_sideslip_is_named(tmp_path):

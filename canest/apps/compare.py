@@ -8,12 +8,13 @@ predict + update is recorded.
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
 from canest.errors import UsageError
-from canest.apps.evaluate import DISPLAY, score
+from canest.apps.evaluate import DISPLAY, as_json, score
 from canest.apps.replay import replay
 from canest.estimation import catalog
 from canest.filters import FILTERS
@@ -27,7 +28,7 @@ class FilterRun:
     name: str
     table: dict  # t and states, as numpy arrays
     scores: dict  # state -> Score
-    step_us: float  # median microseconds per predict + update
+    step_us: float  # median CPU microseconds per predict + update (this thread's: not the machine's load)
     repairs: int
 
 
@@ -71,18 +72,44 @@ def parse_filters(text: str) -> list:
     return names
 
 
+STATES_PER_BLOCK = 3  # states side by side in one block of the table: lines stay under ~100 characters
+
+
 def format_comparison(runs, title: str = "") -> str:
-    """RMSE and MAE per state and filter; states a filter does not estimate (forces, friction) show '-'."""
+    """RMSE and MAE per state and filter, in blocks of ``STATES_PER_BLOCK`` states; states a filter does not
+    estimate (forces, friction) show '-'. The first block ends with the CPU time per step."""
     states = [s for s in DISPLAY if any(s in run.scores for run in runs)]
-    header = " | ".join(f"{state} [{DISPLAY[state][0]}] RMSE   MAE " for state in states)
     lines = [title] if title else []
-    lines.append(f"{'filter':<10} | {header} | us/step")
-    for run in runs:
-        cells = " | ".join(
-            f"{run.scores[s].rmse:>{len(s) + len(DISPLAY[s][0]) + 8}.4f} {run.scores[s].mae:.4f}" if s in run.scores
-            else f"{'-':>{len(s) + len(DISPLAY[s][0]) + 15}}" for s in states)
-        lines.append(f"{run.name:<10} | {cells} | {run.step_us:7.1f}")
-    return "\n".join(lines)
+    for first in range(0, len(states), STATES_PER_BLOCK):
+        block = states[first:first + STATES_PER_BLOCK]
+        timed = first == 0
+        header = " | ".join(f"{state} [{DISPLAY[state][0]}] RMSE   MAE " for state in block)
+        lines.append(f"{'filter':<10} | {header}" + (" | CPU us/step" if timed else ""))
+        for run in runs:
+            cells = " | ".join(
+                f"{run.scores[s].rmse:>{len(s) + len(DISPLAY[s][0]) + 8}.4f} {run.scores[s].mae:.4f}"
+                if s in run.scores else f"{'-':>{len(s) + len(DISPLAY[s][0]) + 15}}" for s in block)
+            lines.append(f"{run.name:<10} | {cells}" + (f" | {run.step_us:11.1f}" if timed else ""))
+        lines.append("")
+    return "\n".join(lines).rstrip("\n")
+
+
+def comparison_json(runs) -> list:
+    """Per filter: ``filter``, ``cpu_us_per_step``, ``repairs`` and ``scores`` as ``canest evaluate --json``
+    gives them (stable keys; NaN as null)."""
+    return [{"filter": run.name, "cpu_us_per_step": run.step_us if math.isfinite(run.step_us) else None,
+             "repairs": run.repairs, "scores": as_json(run.scores.values())} for run in runs]
+
+
+COLOURS = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2", "#7f7f7f", "#bcbd22",
+           "#17becf", "#393b79", "#637939", "#8c6d31", "#843c39", "#7b4173", "#3182bd", "#e6550d", "#31a354",
+           "#756bb1", "#636363")  # matplotlib's tab10, then tab20b/c's darker tones: 20 distinct colours
+DASHES = ("-", "--", "-.", ":")
+
+
+def line_style(i: int) -> dict:
+    """Filter ``i``'s colour and dash: 13 filters never share a look, and neighbours differ in both."""
+    return {"color": COLOURS[i % len(COLOURS)], "linestyle": DASHES[i % len(DASHES)]}
 
 
 def plot_comparison(runs, truth: dict, path) -> None:
@@ -99,10 +126,12 @@ def plot_comparison(runs, truth: dict, path) -> None:
         for i, run in enumerate(runs):
             t = run.table["t"]
             estimate = run.table[state] * factor
-            row[0].plot(t, estimate, lw=0.9, color=f"C{i}", label=run.name)
-            row[1].plot(t, estimate - np.interp(t, truth["t"], truth[state]) * factor, lw=0.9, color=f"C{i}")
+            row[0].plot(t, estimate, lw=0.9, label=run.name, **line_style(i))
+            row[1].plot(t, estimate - np.interp(t, truth["t"], truth[state]) * factor, lw=0.9, **line_style(i))
         row[0].set_ylabel(f"{state} [{unit}]")
         row[1].set_ylabel(f"{state} error [{unit}]")
+        row[0].set_title(f"{state}: estimate and truth", fontsize=9)
+        row[1].set_title(f"{state}: estimate - truth", fontsize=9)
         for ax in row:
             ax.grid(True, alpha=0.3)
     axes[0, 0].legend(fontsize=7, ncol=2)

@@ -43,7 +43,7 @@ def replay(config: Config, log_path, out_log=None, out_csv=None, progress: bool 
     :class:`canest.io.logfiles.LogSource`);
     ``out_log`` or ``out_csv`` ``-`` writes standard output.
 
-    ``step_times``, a list, receives the seconds of every filter predict + update. ``stop``, anything with
+    ``step_times``, a list, receives the CPU seconds (of the replaying thread) of every filter predict + update. ``stop``, anything with
     ``is_set()`` (a ``threading.Event``): once set, reading stops after the current frame, the outputs are
     completed up to the last tick and the summary says ``stopped=1``.
     """

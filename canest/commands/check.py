@@ -1,6 +1,8 @@
 """canest check: validate a config and its DBCs, and show the resolved signal map."""
 from __future__ import annotations
 
+import json
+
 from canest.commands.common import FORMATTER, add_config, config_from_args
 from canest.codec.decode import InputDecoder
 from canest.codec.encode import EstimateEncoder
@@ -8,9 +10,19 @@ from canest.codec.reach import input_shortfalls, output_shortfalls
 from canest.estimation.catalog import losses
 from canest.signals import si_unit
 
-EPILOG = """Every error names the file, the line and the key, message or signal.
+EPILOG = """examples:
+  canest check                                   the built-in config
+  canest check --config configs/ford_fusion_2017.yaml
+  canest check --config my_car.yaml --json | jq .range_warnings
+
+Every error names the file, the line and the key, message or signal.
 Inputs the config does not map are listed with what each costs: the models
 and filters of the catalog that need it, and the states not estimated then.
+Signals whose range stops short of what cars reach are warned about.
+--json prints one object: config, vehicle, input, output, filter, signals
+(canonical, message, signals, frame_id, cycle_time, cycle_time_from, timeout,
+unit, factor, offset, overrides), integrity, tolerated, missing_inputs,
+range_warnings, ok.
 Exit status 0 when the config is usable, 2 when it is not."""
 
 
@@ -18,6 +30,7 @@ def register(subparsers) -> None:
     p = subparsers.add_parser("check", help="validate config and DBCs, print the resolved signal map",
                               description=__doc__, epilog=EPILOG, formatter_class=FORMATTER)
     add_config(p)
+    p.add_argument("--json", action="store_true", help="print the findings as one JSON object (keys below)")
     p.set_defaults(func=run)
 
 
@@ -54,42 +67,71 @@ def _checks(checks) -> list:
     return out
 
 
-def run(args) -> int:
-    config = config_from_args(args)
-    decoder = InputDecoder(config)
-    encoder = EstimateEncoder(config.output_dbc)
+def _report(config, decoder, encoder) -> dict:
+    """Everything ``check`` found, as ``--json`` prints it (stable keys, SI units)."""
     timeouts = decoder.timeouts(config.estimator.timeout_cycles)
-    v = config.vehicle
-    print(f"config   {config.path}")
-    print(f"vehicle  {v.name}: m={v.mass:g} kg, Iz={v.yaw_inertia:g} kg m^2, a={v.cg_to_front:g} m, "
-          f"b={v.cg_to_rear:g} m, steering ratio {v.steering_ratio:g}")
-    print(f"input    {config.input_dbc} on {_bus(config.input_bus)}")
-    print(f"output   {config.output_dbc} on {_bus(config.output_bus)}")
-    e = config.estimator
-    print(f"filter   {e.filter} ({e.factorization}) at {e.rate_hz:g} Hz, low-speed below {e.min_speed:g} m/s")
-    print()
-    print(f"{'canonical':<22} {'message.signal':<40} {'id':>6} {'cycle (from)':>14} {'timeout':>8}  "
-          "SI = factor * DBC value + offset")
+    v, e = config.vehicle, config.estimator
+    signals = []
     for plan in decoder.plans.values():
         seconds, source = plan.cycle_time()
         for spec in plan.specs:
-            print(f"{spec.canonical:<22} {' + '.join(f'{spec.message}.{n}' for n in spec.names):<40} "
-                  f"{plan.message.frame_id:>#6x} {f'{seconds * 1000:g}ms ({source})':>14} "
-                  f"{timeouts[spec.canonical]:>7.3f}s  {si_unit(spec.canonical)} = "
-                  f"{spec.factor:.6g} * value + {spec.offset:g}{_overrides(spec)}")
-    checked = [f"{name} ({', '.join(_checks(c))})" for name, c in config.messages.items()]
+            signals.append({"canonical": spec.canonical, "message": spec.message, "signals": list(spec.names),
+                            "frame_id": plan.message.frame_id, "cycle_time": seconds, "cycle_time_from": source,
+                            "timeout": timeouts[spec.canonical], "unit": si_unit(spec.canonical),
+                            "factor": spec.factor, "offset": spec.offset, "overrides": _overrides(spec).strip(" ()")})
+    return {
+        "config": str(config.path),
+        "vehicle": {"name": v.name, "mass": v.mass, "yaw_inertia": v.yaw_inertia, "cg_to_front": v.cg_to_front,
+                    "cg_to_rear": v.cg_to_rear, "steering_ratio": v.steering_ratio},
+        "input": {"dbc": str(config.input_dbc), "bus": _bus(config.input_bus)},
+        "output": {"dbc": str(config.output_dbc), "bus": _bus(config.output_bus)},
+        "filter": {"name": e.filter, "factorization": e.factorization, "rate_hz": e.rate_hz,
+                   "min_speed": e.min_speed},
+        "signals": signals,
+        "integrity": {name: _checks(c) for name, c in config.messages.items()},
+        "tolerated": dict(config.tolerated),
+        "missing_inputs": losses(config.signals),
+        "range_warnings": input_shortfalls(config.signals) + output_shortfalls(encoder.database),
+        "ok": True,
+    }
+
+
+def _print(report: dict) -> None:
+    v, f = report["vehicle"], report["filter"]
+    print(f"config   {report['config']}")
+    print(f"vehicle  {v['name']}: m={v['mass']:g} kg, Iz={v['yaw_inertia']:g} kg m^2, a={v['cg_to_front']:g} m, "
+          f"b={v['cg_to_rear']:g} m, steering ratio {v['steering_ratio']:g}")
+    print(f"input    {report['input']['dbc']} on {report['input']['bus']}")
+    print(f"output   {report['output']['dbc']} on {report['output']['bus']}")
+    print(f"filter   {f['name']} ({f['factorization']}) at {f['rate_hz']:g} Hz, low-speed below {f['min_speed']:g} m/s")
+    print()
+    print(f"{'canonical':<22} {'message.signal':<40} {'id':>6} {'cycle (from)':>14} {'timeout':>8}  "
+          "SI = factor * DBC value + offset")
+    for row in report["signals"]:
+        overrides = f"  ({row['overrides']})" if row["overrides"] else ""
+        where = " + ".join(f"{row['message']}.{name}" for name in row["signals"])
+        cycle = f"{row['cycle_time'] * 1000:g}ms ({row['cycle_time_from']})"
+        print(f"{row['canonical']:<22} {where:<40} {row['frame_id']:>#6x} {cycle:>14} {row['timeout']:>7.3f}s  "
+              f"{row['unit']} = {row['factor']:.6g} * value + {row['offset']:g}{overrides}")
+    checked = [f"{name} ({', '.join(checks)})" for name, checks in report["integrity"].items()]
     if checked:
         print("\nintegrity checks: " + "; ".join(checked))
-    for message, problem in config.tolerated.items():
+    for message, problem in report["tolerated"].items():
         print(f"tolerated in the input DBC ({f'no signal is taken from {message}' if message else 'lenient load'}): "
               f"{problem}")
-    missing = losses(config.signals)
-    if missing:
-        print("\ninputs not mapped, and what they cost:")
-        print("\n".join(f"  {line}" for line in missing))
-    shortfalls = input_shortfalls(config.signals) + output_shortfalls(encoder.database)
-    if shortfalls:
-        print("\nwarning: signal ranges short of what cars reach:")
-        print("\n".join(f"  {line}" for line in shortfalls))
+    for title, lines in (("inputs not mapped, and what they cost:", report["missing_inputs"]),
+                         ("warning: signal ranges short of what cars reach:", report["range_warnings"])):
+        if lines:
+            print(f"\n{title}")
+            print("\n".join(f"  {line}" for line in lines))
     print("\nOK")
+
+
+def run(args) -> int:
+    config = config_from_args(args)
+    report = _report(config, InputDecoder(config), EstimateEncoder(config.output_dbc))
+    if args.json:
+        print(json.dumps(report))
+    else:
+        _print(report)
     return 0

@@ -1,8 +1,11 @@
 """canest compare: every filter on the same log, scored against truth, timed."""
 from __future__ import annotations
 
+import json
+import sys
+
 from canest.commands.common import FORMATTER, add_config, add_log_reading, config_from_args, log_reading
-from canest.apps.compare import format_comparison, parse_filters, plot_comparison, run_filter
+from canest.apps.compare import comparison_json, format_comparison, parse_filters, plot_comparison, run_filter
 from canest.apps.evaluate import read_table
 from canest.errors import DependencyError
 
@@ -12,8 +15,10 @@ EPILOG = """examples:
   canest compare sine.log sine.csv --filters ckf,fckf,svd-fckf
 
 Each filter gets the config's noise settings and its own default factorization
-and options. RMSE and MAE over valid ticks after --skip seconds; us/step is
-the median wall time of one predict + update on this machine."""
+and options. RMSE and MAE over valid ticks after --skip seconds; CPU us/step
+is the median CPU time of one predict + update (the replaying thread's, so a
+busy machine does not inflate it). --json prints a list, one object per
+filter: filter, cpu_us_per_step, repairs, scores {state: {rmse, mae, unit}}."""
 
 
 def register(subparsers) -> None:
@@ -26,6 +31,7 @@ def register(subparsers) -> None:
     p.add_argument("--filters", default="all", help="'all' or a comma-separated list (default all)")
     p.add_argument("--skip", type=float, default=0.5, help="seconds at the start to leave out (default 0.5)")
     p.add_argument("--plot", help="PNG with estimate vs truth and the errors of every filter")
+    p.add_argument("--json", action="store_true", help="print the comparison as JSON (progress lines go to stderr)")
     p.set_defaults(func=run)
 
 
@@ -38,12 +44,15 @@ def run(args) -> int:
     runs = []
     for name in names:
         runs.append(run_filter(config, args.log, truth, name, args.skip, **log_reading(args)))
-        print(f"  {name}: done", flush=True)
-    print(format_comparison(runs, f"{args.log} ({config.vehicle.name})"))
-    repaired = [f"{r.name} ({r.repairs})" for r in runs if r.repairs]
-    if repaired:
-        print("covariance repairs: " + ", ".join(repaired))
+        print(f"  {name}: done", flush=True, file=sys.stderr if args.json else sys.stdout)
+    if args.json:
+        print(json.dumps(comparison_json(runs)))
+    else:
+        print(format_comparison(runs, f"{args.log} ({config.vehicle.name})"))
+        repaired = [f"{r.name} ({r.repairs})" for r in runs if r.repairs]
+        if repaired:
+            print("covariance repairs: " + ", ".join(repaired))
     if args.plot:
         plot_comparison(runs, truth, args.plot)
-        print(f"plot written to {args.plot}")
+        print(f"plot written to {args.plot}", file=sys.stderr if args.json else sys.stdout)
     return 0
