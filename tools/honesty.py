@@ -34,6 +34,7 @@ from canest.apps.evaluate import DISPLAY, counts, pool, read_table, summarize  #
 from canest.apps.replay import replay  # noqa: E402
 from canest.config import DEFAULT_CONFIG, load_config  # noqa: E402
 from canest.filters import FILTERS  # noqa: E402
+from canest.errors import SimulationError  # noqa: E402
 from canest.sim.simulate import simulate  # noqa: E402
 
 SKIP = 0.5  # s of filter convergence left out, as canest evaluate
@@ -61,7 +62,7 @@ def drive(config, case: Case, workdir: Path):
     if not truth.exists():
         try:
             sim = simulate(config, case.maneuver, case.speed, case.mu, seed=case.seed, duration=case.duration)
-        except RuntimeError:
+        except SimulationError:
             return None
         sim.write_log(log)
         sim.write_truth(f"{truth}.tmp")
