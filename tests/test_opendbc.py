@@ -123,7 +123,7 @@ def test_without_the_extra_one_line_names_the_install_command(tmp_path, needs):
                             cwd=ROOT, env={**os.environ, "PYTHONPATH": str(ROOT)}, timeout=120)
     errors = [line for line in result.stderr.splitlines() if line.startswith("canest: error:")]
     assert result.returncode == 69 and len(errors) == 1 and errors[0] == result.stderr.splitlines()[-1]
-    assert "pip install canest[opendbc]" in errors[0] and str(path) in errors[0]
+    assert "pip install 'canest[opendbc]'" in errors[0] and str(path) in errors[0]
 
 
 # --- checksums -----------------------------------------------------------------------------------------------------

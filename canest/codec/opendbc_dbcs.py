@@ -18,7 +18,7 @@ from pathlib import Path
 from canest.errors import DependencyError
 
 PREFIX = "opendbc:"
-INSTALL = "pip install canest[opendbc] (opendbc needs Python 3.11 or 3.12)"
+INSTALL = "pip install 'canest[opendbc]' (opendbc needs Python 3.11 or 3.12)"
 
 
 def _opendbc(feature: str):
