@@ -68,6 +68,12 @@ TIRE = {
     "nominal_friction": Range(0.05, 2.0),
 }
 
+DRIVE = {  # vehicle: the axle shares of the longitudinal force, for the tire-force model without motor torques
+    "drive_front_share": Range(0.0, 1.0),
+    "brake_front_share": Range(0.0, 1.0),
+}
+DRIVE_LAYOUTS = {"front": 1.0, "rear": 0.0, "all": None}  # vehicle.drive -> front share of a drive force (all: given)
+
 ESTIMATOR = {
     "rate_hz": Range(1.0, 1000.0, "Hz"),
     "min_speed": Range(0.0, 50.0, "m/s"),

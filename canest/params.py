@@ -45,6 +45,8 @@ class VehicleParams:
     cornering_stiffness_front: float
     cornering_stiffness_rear: float
     tire: TireModelParams = TireModelParams()
+    drive_front_share: float = 1.0  # front axle's share of a drive force (config drive: front 1, rear 0, all: given)
+    brake_front_share: float = 0.7  # front axle's share of a braking force (brake balance)
 
     @property
     def wheelbase(self) -> float:

@@ -330,3 +330,20 @@ def test_a_config_larger_than_the_limit_is_refused_unread(tmp_path):
     path.write_text("# padding\n" * (MAX_BYTES // 10 + 1))
     assert error_of(path) == f"{path}: config larger than 1024 KiB; a config is a few kilobytes"
     assert error_of(tmp_path) == f"{tmp_path}: cannot read config: Is a directory"
+
+
+def test_drive_layout_keys(tmp_path):
+    """vehicle.drive gives the front axle's share of a drive force (all: drive_front_share); front by default."""
+    vehicle = load_config(write_variant(tmp_path, lambda d: None)).vehicle
+    assert (vehicle.drive_front_share, vehicle.brake_front_share) == (1.0, 0.7)
+    path = write_variant(tmp_path, lambda d: d["vehicle"].update(drive="all", drive_front_share=0.4, brake_front_share=0.6))
+    vehicle = load_config(path).vehicle
+    assert (vehicle.drive_front_share, vehicle.brake_front_share) == (0.4, 0.6)
+    assert load_config(write_variant(tmp_path, lambda d: d["vehicle"].update(drive="rear"))).vehicle.drive_front_share == 0
+    path = write_variant(tmp_path, lambda d: d["vehicle"].update(drive="fwd"))
+    assert re.search(r":\d+: vehicle\.drive: unknown drive 'fwd'; available: all, front, rear$", error_of(path))
+    path = write_variant(tmp_path, lambda d: d["vehicle"].update(drive="front", drive_front_share=0.6))
+    assert re.search(r"vehicle\.drive_front_share: only with drive: all \(drive: front puts 100% of the drive force "
+                     r"on the front axle\)$", error_of(path))
+    path = write_variant(tmp_path, lambda d: d["vehicle"].update(brake_front_share=1.5))
+    assert "vehicle.brake_front_share: must be at most 1 (0 to 1), got 1.5" in error_of(path)

@@ -67,7 +67,8 @@ def test_init_from_the_ford_dbc_finds_its_inputs_and_check_accepts_the_config(tm
     check = canest("check", "--config", out)
     assert check.returncode == 0, check.stderr
     assert check.stdout.rstrip().endswith("OK")
-    assert "no motor_torques (motor_torque_fl" in check.stdout and "model tire_force, two_track unavailable" \
+    assert "no motor_torques (motor_torque_fl" in check.stdout and "model two_track unavailable" in check.stdout \
+        and "model tire_force: longitudinal forces from ax and vehicle.drive" \
         in check.stdout
 
 

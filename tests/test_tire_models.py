@@ -107,7 +107,7 @@ def test_tire_force_model_left_turn_signs_and_relaxation(config):
     assert X[0, tire_force.YAW] > 0 and z[0, 1] > 0  # positive yaw rate and lateral acceleration
     assert np.all(X[0, tire_force.FY] > 0)  # every tire pushes left
     assert X[0, 4] > X[0, 3]  # the loaded outer (right) front tire carries more
-    steady = model.steady_state_forces(X[:, 0], X[:, 2], X[:, 2] * np.tan(X[:, 1]), u)
+    steady = model.steady_state_forces(X[:, 0], X[:, 2], X[:, 2] * np.tan(X[:, 1]), u, model.longitudinal_forces(X, u))
     np.testing.assert_allclose(X[0, tire_force.FY], steady[0], rtol=0.02)  # relaxed onto the steady state
     ay = z[0, 1]
     assert ay == pytest.approx(X[0, 0] * X[0, 2], rel=0.02)  # steady turn: ay = r vx

@@ -39,6 +39,7 @@ class ModelEntry:
     default_filter: str
     required_inputs: tuple
     inputs_per_need: dict = field(default_factory=dict)  # a filter need -> the inputs it adds (e.g. a second IMU)
+    optional_groups: dict = field(default_factory=dict)  # an input group used when mapped -> what replaces it if not
 
     @property
     def filters(self) -> tuple:
@@ -58,8 +59,9 @@ class ModelEntry:
 
 CATALOG = {entry.name: entry for entry in (
     ModelEntry("single_track", SingleTrackModel, SingleTrackEstimator, "ckf", BASE_INPUTS),
-    ModelEntry("tire_force", TireForceModel, TireForceEstimator, "ckf", BASE_INPUTS + INPUT_GROUPS["motor_torques"],
-               {"sensor_sets": INPUT_GROUPS["imu_2"]}),
+    ModelEntry("tire_force", TireForceModel, TireForceEstimator, "ckf", BASE_INPUTS,
+               {"sensor_sets": INPUT_GROUPS["imu_2"]},
+               {"motor_torques": "longitudinal forces from ax and vehicle.drive"}),
     ModelEntry("two_track", TwoTrackModel, FrictionEstimator, "jckf", BASE_INPUTS + INPUT_GROUPS["motor_torques"]),
 )}
 DEFAULT_MODEL = "single_track"
@@ -92,7 +94,8 @@ def states_of(entry: ModelEntry) -> tuple:
 
 def losses(mapped) -> list:
     """What each input group not (fully) in ``mapped`` costs, one line per group: the models and filters of the
-    catalog that need it and the states that are then not estimated (none lost: an empty list)."""
+    catalog that need it, what models that use it when mapped take instead, and the states that are then not
+    estimated (none lost: an empty list)."""
     lines = []
     for group, inputs in INPUT_GROUPS.items():
         missing = [name for name in inputs if name not in mapped]
@@ -109,6 +112,8 @@ def losses(mapped) -> list:
             costs.append(("no model runs" if not left else f"model {', '.join(models)} unavailable"))
         if filters:
             costs.append(f"filter {', '.join(f'{f} (on {m})' for f, m in filters)} unavailable")
+        costs += [f"model {name}: {entry.optional_groups[group]}" for name, entry in CATALOG.items()
+                  if group in entry.optional_groups]
         costs.append(f"{', '.join(lost)} not estimated" if lost else "every state still estimated")
         lines.append(f"no {group} ({', '.join(missing)}): {'; '.join(costs)}")
     return lines

@@ -4,8 +4,11 @@ Four lateral tire forces beside yaw rate, sideslip and vx, with any
 sigma-point filter on the first IMU, or with ``dici-gfckf`` whose local
 filters each get one IMU (plus the shared wheel speeds). The model's input
 ``Fx`` per wheel comes from the motor torques and the wheel accelerations
-(DICI-GFCKF eq 4, :mod:`canest.models.wheel_force`). The lateral channels
-(ax, ay) are skipped at low speed, as the single-track binding skips ay.
+(DICI-GFCKF eq 4, :mod:`canest.models.wheel_force`); a config that maps no
+motor torques gets :class:`~canest.models.tire_force.AxDrivenTireForceModel`,
+whose longitudinal forces follow from ax and the drive layout (eq 1), so the
+model (and its tire saturation) runs on any car. The lateral channels (ax,
+ay) are skipped at low speed, as the single-track binding skips ay.
 """
 from __future__ import annotations
 
@@ -16,13 +19,12 @@ from canest.estimation import validity
 from canest.estimation.core import Estimator
 from canest.estimation.inputs import WHEEL_SPEEDS, TickInputs
 from canest.models import tire_force
-from canest.models.tire_force import TireForceModel
+from canest.models.tire_force import AxDrivenTireForceModel, TireForceModel
 from canest.models.wheel_force import WheelAcceleration, longitudinal_forces
 from canest.signals import INPUT_GROUPS, WHEELS
 
 TORQUES = INPUT_GROUPS["motor_torques"]
 LATERAL_FORCES = tuple(f"fy_{w}" for w in WHEELS)
-SENSOR_SETS = np.array(tire_force.SENSOR_SETS)
 
 
 def torques(inputs: TickInputs) -> np.ndarray:
@@ -39,7 +41,11 @@ class TireForceEstimator(Estimator):
     extra_states = LATERAL_FORCES
 
     def __init__(self, config):
-        super().__init__(config, TireForceModel(config.vehicle, config.vehicle.tire))
+        self.torques = all(name in config.signals for name in TORQUES)
+        model = TireForceModel if self.torques else AxDrivenTireForceModel
+        super().__init__(config, model(config.vehicle, config.vehicle.tire))
+        self.sensor_sets = np.array(self.model.sensor_sets)
+        self.force_inputs = TORQUES if self.torques else ("ax",)  # what the longitudinal forces come from
         self.wheel_acceleration = WheelAcceleration()
 
     def reset(self) -> None:
@@ -55,7 +61,9 @@ class TireForceEstimator(Estimator):
         return x0
 
     def _control(self, inputs: TickInputs, t: float) -> np.ndarray:
-        """u = (delta, ax, ay, Fx per wheel from eq 4)."""
+        """u = (delta, ax, ay, Fx per wheel from eq 4); without motor torques (delta, ax, ay)."""
+        if not self.torques:
+            return np.array([self._road_wheel_angle(inputs), *accelerations(inputs)])
         speeds = [inputs.values.get(name, 0.0) for name in WHEEL_SPEEDS]
         fx = longitudinal_forces(torques(inputs), self.wheel_acceleration.update(t, speeds),
                                  self.vehicle.wheel_inertia, self.vehicle.wheel_radius)
@@ -64,8 +72,8 @@ class TireForceEstimator(Estimator):
     def _update(self, channels, inputs: TickInputs, u: np.ndarray, lateral_ok: bool, t: float) -> bool:
         """Non-DICI filters use the first IMU; ``dici-gfckf`` gives local filter j the rows of IMU j."""
         if not hasattr(self.filter, "sensor_sets"):
-            return self._apply(channels, u, t, mask=SENSOR_SETS <= 1)
-        local_masks = [channels.mask & ((SENSOR_SETS == 0) | (SENSOR_SETS == j + 1))
+            return self._apply(channels, u, t, mask=self.sensor_sets <= 1)
+        local_masks = [channels.mask & ((self.sensor_sets == 0) | (self.sensor_sets == j + 1))
                        for j in range(self.filter.sensor_sets)]
         if not any(m.any() for m in local_masks):
             return False
@@ -76,8 +84,9 @@ class TireForceEstimator(Estimator):
 
     def _extra_values(self, values: dict, valid: dict, causes: dict, std: np.ndarray, inputs: TickInputs,
                       lateral_ok: bool) -> None:
-        """The forces are valid where sideslip is (they are judged by the same lateral channels) and torques are in."""
-        cause = causes["beta"] if causes["beta"] != "valid" or inputs.has(*TORQUES) else "no_input"
+        """The forces are valid where sideslip is (they are judged by the same lateral channels) and the inputs of
+        the longitudinal forces (torques, else ax) are in."""
+        cause = causes["beta"] if causes["beta"] != "valid" or inputs.has(*self.force_inputs) else "no_input"
         inflation = validity.inflation(self.judge.consistency.ratio("beta"))
         for name, force, force_std in zip(LATERAL_FORCES, self.filter.x[tire_force.FY], std[tire_force.FY]):
             values[name], values[f"{name}_std"] = force, force_std * inflation

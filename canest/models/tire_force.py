@@ -9,6 +9,10 @@ positive to the left (ISO 8855).
 Input ``u = (delta, ax, ay, Fx_fl, Fx_fr, Fx_rl, Fx_rr)``: road wheel angle,
 the measured accelerations (for the loads of eq 7 only) and the longitudinal
 tire forces from the in-wheel motors (eq 4, :mod:`canest.models.wheel_force`).
+:class:`AxDrivenTireForceModel` is the same model for cars without motor
+torques: ``u = (delta, ax, ay)`` and the longitudinal forces follow from ax
+and the drive layout by eq 1 (:class:`canest.models.wheel_force.DriveLayout`),
+so ax is its input and not its measurement.
 
 Dynamics (:mod:`canest.models.wheels` for eqs 1-3, 7 and 8, :mod:`canest.models.tire`
 for eqs 5, 6 and 13), with ``vy = vx tan(beta)``:
@@ -35,6 +39,7 @@ import numpy as np
 from canest.params import VehicleParams
 from canest.models.integrate import rk4
 from canest.models.tire import TireModelParams, friction_circle, magic_formula, relaxation_rate
+from canest.models.wheel_force import DriveLayout
 from canest.models.wheels import MIN_WHEEL_SPEED, WheelGeometry
 
 STATE_NAMES = ("yaw_rate", "beta", "vx", "fy_fl", "fy_fr", "fy_rl", "fy_rr")
@@ -58,25 +63,31 @@ class TireForceModel:
         self.tire = tire
         self.wheels = WheelGeometry(vehicle)
 
-    def steady_state_forces(self, r, vx, vy, u):
-        """Fy_ss (N, 4) of the Magic Formula at the slip angles of eq 8 and the loads of eq 7."""
+    def longitudinal_forces(self, X: np.ndarray, u: np.ndarray) -> np.ndarray:
+        """Fx (N, 4) of points X: the input's, from the motor torques (eq 4)."""
+        return np.broadcast_to(u[FX], (X.shape[0], 4))
+
+    def steady_state_forces(self, r, vx, vy, u, fx):
+        """Fy_ss (N, 4) of the Magic Formula at the slip angles of eq 8 and the loads of eq 7, within the friction
+        circle with the longitudinal forces ``fx``."""
         v_long, v_lat = self.wheels.wheel_velocities(r, vx, vy, u[DELTA])
         alpha = self.wheels.slip_angles(v_long, v_lat)
         fz = self.wheels.loads(u[AX], u[AY])
         peak = self.tire.nominal_friction * fz
         fy = magic_formula(alpha, self.wheels.cornering_stiffness(fz, self.tire), self.tire.lateral_shape,
                            self.tire.lateral_curvature, peak)
-        return friction_circle(u[FX], fy, peak)[1]
+        return friction_circle(fx, fy, peak)[1]
 
     def derivatives(self, X: np.ndarray, u: np.ndarray) -> np.ndarray:
         r, beta = X[:, YAW], X[:, BETA]
         vx = np.maximum(X[:, VX], MIN_WHEEL_SPEED)
         fy = X[:, FY]
+        fx = self.longitudinal_forces(X, u)
         out = np.empty_like(X)
-        out[:, YAW], out[:, BETA], out[:, VX] = self.wheels.body_derivatives(r, beta, vx, u[FX], fy, u[DELTA])
+        out[:, YAW], out[:, BETA], out[:, VX] = self.wheels.body_derivatives(r, beta, vx, fx, fy, u[DELTA])
         speed = vx / np.cos(beta)
         rate = relaxation_rate(speed, self.tire.relaxation_length)
-        out[:, FY] = rate[:, None] * (self.steady_state_forces(r, vx, vx * np.tan(beta), u) - fy)
+        out[:, FY] = rate[:, None] * (self.steady_state_forces(r, vx, vx * np.tan(beta), u, fx) - fy)
         return out
 
     def transition(self, X: np.ndarray, u: np.ndarray, dt: float) -> np.ndarray:
@@ -96,7 +107,31 @@ class TireForceModel:
         """Rows of MEASUREMENT_NAMES for points X (N, 7): eq 14, the gyro, the mean wheel-frame speed."""
         r, vx = X[:, YAW], X[:, VX]
         vy = vx * np.tan(X[:, BETA])
-        ax_m, ay_m, _ = self.wheels.body_accelerations(u[FX], X[:, FY], u[DELTA])
+        ax_m, ay_m, _ = self.wheels.body_accelerations(self.longitudinal_forces(X, u), X[:, FY], u[DELTA])
         v_long, _ = self.wheels.wheel_velocities(r, vx, vy, u[DELTA])
         imu = np.column_stack([ax_m, ay_m, r])
         return np.column_stack([imu, v_long.mean(axis=1), imu])
+
+
+class AxDrivenTireForceModel(TireForceModel):
+    """The tire-force model on what every car sends: longitudinal forces from ax and the drive layout (eq 1).
+
+    ``u = (delta, ax, ay)``. The model's ax equals the measured ax by
+    construction, so the ax rows (``ax``, ``ax_2``) are not measurements here.
+    """
+
+    measurement_names = tuple(name for name in MEASUREMENT_NAMES if not name.startswith("ax"))
+    sensor_sets = tuple(s for name, s in zip(MEASUREMENT_NAMES, SENSOR_SETS) if not name.startswith("ax"))
+    KEPT = np.array([MEASUREMENT_NAMES.index(name) for name in measurement_names])
+
+    def __init__(self, vehicle: VehicleParams, tire: TireModelParams = TireModelParams()):
+        super().__init__(vehicle, tire)
+        self.layout = DriveLayout(vehicle)
+
+    def longitudinal_forces(self, X: np.ndarray, u: np.ndarray) -> np.ndarray:
+        """Fx (N, 4) of eq 1 solved with the measured ax, each point's lateral forces and the drive layout."""
+        return self.layout.forces(u[AX], X[:, FY], u[DELTA])
+
+    def measure(self, X: np.ndarray, u: np.ndarray) -> np.ndarray:
+        """Rows of ``measurement_names``: the tire-force model's without ax."""
+        return super().measure(X, u)[:, self.KEPT]

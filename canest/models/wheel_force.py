@@ -1,6 +1,6 @@
-"""Longitudinal tire forces from the in-wheel motors (DICI-GFCKF paper eq 4).
+"""Longitudinal tire forces: from the in-wheel motors (DICI-GFCKF paper eq 4), or from ax and the drive layout.
 
-Each wheel's rotational dynamics, ``J dw/dt = T - R Fx`` (DCKF paper eq 6,
+**From the motors.** Each wheel's rotational dynamics, ``J dw/dt = T - R Fx`` (DCKF paper eq 6,
 whose ``F_x R w`` carries a stray ``w``), give
 
     Fx = (T - J dw/dt) / R
@@ -10,6 +10,26 @@ derivative is meant. ``dw/dt`` comes from the noisy wheel speeds through
 :class:`WheelAcceleration`. Rolling resistance and brake torque are not in the
 balance: on the simulator (0.012 Fz rolling resistance) this reads ~55 N high
 per wheel.
+
+**From ax and the drive layout** (:class:`DriveLayout`, for cars that send no
+motor torques). The paper's eq 1 is the body's longitudinal balance,
+
+    m ax = (Fx_fl + Fx_fr) cos(delta) - (Fy_fl + Fy_fr) sin(delta) + Fx_rl + Fx_rr.
+
+With the measured ax and the layout's axle shares (``s`` on the front axle,
+``1 - s`` on the rear, each axle's share halved between its wheels), every
+wheel carries ``Fx_ij = s_ij F`` of one total ``F``, and eq 1 solved for it is
+
+    F = (m ax + (Fy_fl + Fy_fr) sin(delta)) / (s cos(delta) + 1 - s).
+
+``s`` is the drive's front share while ``F >= 0`` and the brake balance while
+braking (``F`` is continuous through 0, where both give 0). The forces depend
+on the lateral force states, so the model's ax (eq 14's first row) equals the
+measured ax identically: ax becomes an input and leaves the measurements.
+Aerodynamic drag and rolling resistance are not modelled: the accelerometer
+measures the tire forces less the drag, so on the simulator (0.42 N s^2/m^2
+drag, 0.012 rolling resistance) the total reads ~200 N (80 km/h) below the
+tires' drive force, split over four wheels each carrying several kN at high ay.
 """
 from __future__ import annotations
 
@@ -70,3 +90,25 @@ class WheelAcceleration:
 def longitudinal_forces(torque, wheel_acceleration, wheel_inertia: float, wheel_radius: float) -> np.ndarray:
     """Eq 4 corrected: ``Fx = (T - J dw/dt) / R`` per wheel, N."""
     return (np.asarray(torque, dtype=float) - wheel_inertia * np.asarray(wheel_acceleration)) / wheel_radius
+
+
+class DriveLayout:
+    """Per-wheel longitudinal forces from ax by eq 1 and the axle shares of the drive and of the brakes."""
+
+    def __init__(self, vehicle):
+        self.mass = vehicle.mass
+        self.drive = self.wheel_shares(vehicle.drive_front_share)
+        self.brake = self.wheel_shares(vehicle.brake_front_share)
+
+    @staticmethod
+    def wheel_shares(front_share: float) -> np.ndarray:
+        """(fl, fr, rl, rr) shares of a total force with ``front_share`` on the front axle."""
+        return 0.5 * np.array([front_share, front_share, 1.0 - front_share, 1.0 - front_share])
+
+    def forces(self, ax: float, fy: np.ndarray, delta: float) -> np.ndarray:
+        """``Fx`` (N, 4) of eq 1 solved for the total force, for lateral forces ``fy`` (N, 4) in the wheel frames."""
+        sin_d, cos_d = np.sin(delta), np.cos(delta)
+        balance = self.mass * ax + (fy[:, 0] + fy[:, 1]) * sin_d
+        shares = np.where(balance[:, None] >= 0.0, self.drive, self.brake)
+        total = balance / ((shares[:, 0] + shares[:, 1]) * cos_d + shares[:, 2] + shares[:, 3])
+        return shares * total[:, None]
