@@ -9,6 +9,7 @@ import sys
 from canest import __version__
 from canest.errors import CanestError, FileIOError
 
+LOG_LEVELS = ("DEBUG", "INFO", "WARNING", "ERROR")
 # command -> what `canest --help` lists; a command's module (and numpy, scipy, python-can behind it) is imported
 # only when that command runs or shows its own help, so `canest --version` and `canest --help` start fast
 COMMANDS = {
@@ -60,14 +61,26 @@ def build_parser(argv=None) -> argparse.ArgumentParser:
     for name, summary in COMMANDS.items():
         if named is None or name == named:
             importlib.import_module(f"canest.commands.{name}").register(subparsers)
+            _add_log_level(subparsers.choices[name])
         else:
             subparsers.add_parser(name, help=summary)
     return parser
 
 
+def _add_log_level(command: argparse.ArgumentParser) -> None:
+    """``--log-level`` on every command (``run`` has its own, default INFO, for the journal)."""
+    if "--log-level" not in command._option_string_actions:
+        command.add_argument("--log-level", dest="logging_level", choices=LOG_LEVELS,
+                             help="log records of canest and python-can at this level and above to stderr "
+                                  "(default: warnings only, as plain lines)")
+
+
 def main(argv=None) -> None:
     signal.signal(signal.SIGPIPE, signal.SIG_DFL)  # `canest check | head` ends quietly
     args = build_parser(sys.argv[1:] if argv is None else argv).parse_args(argv)
+    if getattr(args, "logging_level", None):
+        from canest.apps import journal  # deferred: `canest --version` stays fast
+        journal.setup(args.logging_level)
     try:
         sys.exit(args.func(args))
     except CanestError as exc:  # a problem of the input: one line; anything else is a bug and keeps its traceback

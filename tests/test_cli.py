@@ -143,3 +143,19 @@ def test_replay_of_concatenated_logs_accounts_for_every_frame(dlc_run, tmp_path)
     steps = np.diff(t)
     assert np.sum(steps < 0) == 1, "ticks follow the source clock: one step back, at the junction"
     assert np.allclose(steps[steps > 0], 0.01), "one row per tick, none skipped or repeated"
+
+
+def test_every_command_takes_a_log_level():
+    """--log-level on every command: records with their level and logger at and above it, none below."""
+    toyota = ROOT / "configs" / "toyota_rav4_opendbc.yaml"
+    pytest.importorskip("opendbc", reason="the tolerated-DBC warning needs the opendbc extra (in the test extra)")
+    plain = canest("check", "--config", toyota).stderr
+    leveled = canest("check", "--config", toyota, "--log-level", "WARNING").stderr
+    quiet = canest("check", "--config", toyota, "--log-level", "ERROR").stderr
+    assert "overlapping in message PCS_HUD" in plain and not plain.startswith("WARNING")
+    assert leveled.startswith("WARNING canest.config: ") and "PCS_HUD" in leveled
+    assert "PCS_HUD" not in quiet
+    from canest.cli import COMMANDS
+
+    for command in COMMANDS:
+        assert "--log-level" in canest(command, "--help").stdout, command
