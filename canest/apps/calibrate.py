@@ -34,6 +34,11 @@ carries its gravity. Every other parameter is left free (bounded to what a
 car can be off by); the confidence intervals say how well the drives pinned
 each down, their correlation which ones trade against each other.
 
+Ticks above ``LINEAR_AY`` are left out of the residuals (the model runs
+through them): fitting a line to the tires' curve there would read their
+saturation as less stiffness and, where the drive's ay is lopsided, as a
+steering offset (3-6 % and 0.3 deg on the simulator without the limit).
+
 The 95 % intervals come from the Jacobian at the solution, each channel
 weighted by its own residual RMS and widened by the residuals' correlation
 in time (an AR(1) fit: neighbouring 20 ms samples are not independent errors).
@@ -51,6 +56,8 @@ from canest.models.wheels import GRAVITY
 from canest.params import VehicleParams
 
 SETTLE = 1.0  # s at the start of each stretch left out of the fit: the model starts from vy = 0
+LINEAR_AY = 2.0  # m/s^2: ticks of more measured lateral acceleration are left out of the fit (the model still runs
+# through them): the tires' force there falls short of linear, by the curve and by the load transfer
 MEAN_BANK_STD = math.radians(0.01)  # rad: the prior that holds the logs' mean bank at 0
 CONFIDENCE = 1.96  # 95 % two-sided
 DIFF_STEP = 1e-6  # forward-difference step, in units of each parameter's scale
@@ -107,8 +114,9 @@ class SingleTrackFit:
 
     @staticmethod
     def _fitted_ticks(drive: Drive) -> np.ndarray:
-        since_start = np.arange(len(drive.t)) - np.maximum.accumulate(np.where(drive.starts, np.arange(len(drive.t)), 0))
-        return since_start * STEP >= SETTLE
+        index = np.arange(len(drive.t))
+        since_start = index - np.maximum.accumulate(np.where(drive.starts, index, 0))
+        return (since_start * STEP >= SETTLE) & (np.abs(drive.ay) < LINEAR_AY)
 
     def predict(self, drive: Drive, bank_index: int, theta: np.ndarray):
         """Predicted (yaw rate, ay), each (ticks, columns), for parameter columns ``theta`` (n, columns).

@@ -37,7 +37,8 @@ UNITS = {  # parameter -> (config key or label, unit, factor from the fit's valu
 
 
 def register(subparsers) -> None:
-    p = subparsers.add_parser("calibrate", help="fit stiffnesses, steering, wheel radius and sensor biases to logged drives",
+    p = subparsers.add_parser("calibrate",
+                              help="fit stiffnesses, steering, wheel radius and sensor biases to logged drives",
                               description=__doc__, epilog=EPILOG, formatter_class=FORMATTER)
     p.add_argument("logs", nargs="+", metavar="LOG", help="logged drives (any format replay reads)")
     add_config(p)

@@ -67,13 +67,15 @@ def register(subparsers) -> None:
     car = p.add_argument_group("the simulated car, where it differs from the config")
     car.add_argument("--stiffness-scale", default="1,1", metavar="FRONT,REAR",
                      help="the tires' cornering stiffness, times the plant's own, front and rear (default 1,1)")
-    car.add_argument("--steering-ratio-scale", type=float, default=1.0, help="true steering ratio / config's (default 1)")
+    car.add_argument("--steering-ratio-scale", type=float, default=1.0,
+                     help="true steering ratio / config's (default 1)")
     car.add_argument("--wheel-radius-scale", type=float, default=1.0,
                      help="true effective wheel radius / config's (default 1)")
     car.add_argument("--steering-offset", type=float, metavar="DEG",
                      help="steering wheel angle sensor bias in deg (measured = true + offset; default the sensor's)")
     car.add_argument("--gyro-bias", type=float, metavar="DEG/S", help="yaw rate sensor bias in deg/s (default 0.05)")
-    car.add_argument("--ay-bias", type=float, metavar="M/S2", help="lateral accelerometer bias in m/s^2 (default -0.03)")
+    car.add_argument("--ay-bias", type=float, metavar="M/S2",
+                     help="lateral accelerometer bias in m/s^2 (default -0.03)")
     car.add_argument("--bank", type=float, default=0.0, metavar="DEG",
                      help="road bank in deg, positive when the road falls to the left (default 0)")
     p.add_argument("--out", "-o", required=True, help="CAN log to write (- for candump text on standard output)")

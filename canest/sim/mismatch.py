@@ -9,7 +9,8 @@ gyro, lateral accelerometer) in place of the defaults of
 the car's x axis, positive when the road falls to the left, so that gravity
 pulls the car to the left with ``g sin(bank)`` (which the accelerometer, measuring
 the tires' force, does not see). :func:`true_vehicle` gives the parameters of the
-car the plant drives, as a config would state them were it right.
+car the plant drives, as a config would state them were it right, :func:`true_fit` the
+calibration that would be exact.
 """
 from __future__ import annotations
 
@@ -17,6 +18,9 @@ import dataclasses
 import math
 from dataclasses import dataclass
 
+import numpy as np
+
+from canest.apps.calibrate import SHARED, Fit
 from canest.models.wheels import GRAVITY, WheelGeometry
 from canest.params import VehicleParams
 from canest.sim.sensors import DEFAULT_SENSORS, SensorError
@@ -38,7 +42,8 @@ class PlantMismatch:
 
     def tire(self, tire: TireParams = TireParams()) -> TireParams:
         """The plant's tire with the lateral stiffnesses scaled."""
-        return dataclasses.replace(tire, lateral_stiffness_front=tire.lateral_stiffness_front * self.stiffness_scale_front,
+        return dataclasses.replace(tire,
+                                   lateral_stiffness_front=tire.lateral_stiffness_front * self.stiffness_scale_front,
                                    lateral_stiffness_rear=tire.lateral_stiffness_rear * self.stiffness_scale_rear)
 
     def sensor_errors(self) -> dict:
@@ -56,7 +61,8 @@ class PlantMismatch:
         return GRAVITY * math.sin(self.bank)
 
 
-def true_vehicle(config_vehicle: VehicleParams, mismatch: PlantMismatch, tire: TireParams = TireParams()) -> VehicleParams:
+def true_vehicle(config_vehicle: VehicleParams, mismatch: PlantMismatch,
+                 tire: TireParams = TireParams()) -> VehicleParams:
     """The car the plant drives: ratio and wheel radius scaled, and the axle cornering stiffnesses of its tire
     at static load (what a right config would say)."""
     geometry = WheelGeometry(config_vehicle)
@@ -68,3 +74,18 @@ def true_vehicle(config_vehicle: VehicleParams, mismatch: PlantMismatch, tire: T
         wheel_radius=config_vehicle.wheel_radius * mismatch.wheel_radius_scale,
         cornering_stiffness_front=float(scaled.lateral_stiffness_front * loads[:2].sum()),
         cornering_stiffness_rear=float(scaled.lateral_stiffness_rear * loads[2:].sum()))
+
+
+def true_fit(config_vehicle: VehicleParams, mismatch: PlantMismatch, banks=(0.0,)) -> Fit:
+    """The calibration that would be exact for this car (intervals 0), in the terms of :mod:`canest.apps.calibrate`;
+    ``banks`` (rad) per log. Written with :func:`canest.apps.calibrated_config.write_calibrated` it is the right
+    config, the baseline a calibrated one is measured against."""
+    truth = true_vehicle(config_vehicle, mismatch)
+    values = {"front": truth.cornering_stiffness_front / config_vehicle.cornering_stiffness_front,
+              "rear": truth.cornering_stiffness_rear / config_vehicle.cornering_stiffness_rear,
+              "ratio": mismatch.steering_ratio_scale, "speed": mismatch.wheel_radius_scale,
+              "steering_offset": mismatch.steering_offset or 0.0, "gyro_bias": mismatch.gyro_bias or 0.0,
+              "ay_bias": mismatch.ay_bias or 0.0}
+    names = [*(p.name for p in SHARED), *(f"bank[{i}]" for i in range(len(banks)))]
+    return Fit(names, np.array([*(values[p.name] for p in SHARED), *banks]), np.zeros(len(names)),
+               np.eye(len(names)), {}, 0.0)

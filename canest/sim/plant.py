@@ -16,7 +16,8 @@ Tire forces from :mod:`canest.sim.tire`; lateral forces follow the steady
 state with relaxation ``dFy/dt = |v_long| / sigma (Fy_ss - Fy)`` (paper eq 6).
 Chassis: ``m (dvx/dt - r vy) = sum Fx_b - drag``, ``m (dvy/dt + r vx) = sum Fy_b``,
 ``Iz dr/dt = sum (x_i Fy_b,i - y_i Fx_b,i)``; a banked road adds gravity's
-``bank_acceleration`` (m/s^2) to dvy/dt, which the measured ay (the tires' force) does not see; wheels: ``J dw/dt = T - R Fx - R f_rr Fz``.
+``bank_acceleration`` (m/s^2) to dvy/dt, which the measured ay (the tires' force) does not see;
+wheels: ``J dw/dt = T - R Fx - R f_rr Fz``.
 """
 from __future__ import annotations
 
