@@ -6,7 +6,10 @@ axles' lateral forces, which follow their slip angles over the config's tire
 :data:`canest.apps.drive_signals.STEP`) is driven by the measured steering
 wheel angle and wheel speed of every log and predicts the measured yaw rate
 and lateral acceleration; :func:`scipy.optimize.least_squares` moves the
-parameters until the predictions fit, over all logs at once:
+parameters until the predictions fit, over all logs at once; a third channel
+is the kinematic identity ``ay - ay_bias = v r + dvy/dt - g sin(bank)`` with the
+measured yaw rate (only dvy/dt is the model's), which holds beyond the tires'
+linear range too:
 
 - ``front``, ``rear``: each axle's cornering stiffness, a factor on the config's;
 - ``ratio``: the steering ratio, a factor on the config's;
@@ -109,17 +112,19 @@ class SingleTrackFit:
         self.parameters = [*SHARED, *(BANK for _ in drives)]
         self.names = [*(p.name for p in SHARED), *(f"bank[{i}]" for i in range(len(drives)))]
         self.scales = np.array([p.scale for p in self.parameters])
-        self.weights = {"yaw_rate": 1.0 / math.radians(0.3), "ay": 1.0 / 0.15}
-        self.fitted = [self._fitted_ticks(d) for d in drives]
+        self.weights = {"yaw_rate": 1.0 / math.radians(0.3), "ay": 1.0 / 0.15, "kinematic": 1.0 / 0.15}
+        self.settled = [self._settled(d) for d in drives]
+        self.fitted = [settled & (np.abs(d.ay) < LINEAR_AY) for settled, d in zip(self.settled, drives)]
 
     @staticmethod
-    def _fitted_ticks(drive: Drive) -> np.ndarray:
+    def _settled(drive: Drive) -> np.ndarray:
+        """The ticks ``SETTLE`` s or more into their stretch."""
         index = np.arange(len(drive.t))
         since_start = index - np.maximum.accumulate(np.where(drive.starts, index, 0))
-        return (since_start * STEP >= SETTLE) & (np.abs(drive.ay) < LINEAR_AY)
+        return since_start * STEP >= SETTLE
 
     def predict(self, drive: Drive, bank_index: int, theta: np.ndarray):
-        """Predicted (yaw rate, ay), each (ticks, columns), for parameter columns ``theta`` (n, columns).
+        """Predicted (yaw rate, ay, dvy/dt), each (ticks, columns), for parameter columns ``theta`` (n, columns).
 
         The model is linear in its state ``(vy, r, Ff, Fr)`` with the inputs held over a tick, so each tick's RK4
         step is the matrix ``Phi = sum (A dt)^j / j!`` (j to 4) and ``Gamma = dt sum (A dt)^j / (j + 1)!`` (j to 3)
@@ -138,7 +143,8 @@ class SingleTrackFit:
             np.stack([zero, zero, a / iz * one, -b / iz * one], -1),
             np.stack([-cf_t / sigma, -cf_t * a / sigma, -vx / sigma, zero], -1),
             np.stack([-cr_t / sigma, cr_t * b / sigma, zero, -vx / sigma], -1)], -2) * STEP  # (ticks, columns, 4, 4)
-        constant = np.stack([GRAVITY * np.sin(theta[7 + bank_index]) * one, zero, cf * vx * delta / sigma, zero], -1)
+        gravity = GRAVITY * np.sin(theta[7 + bank_index]) * one
+        constant = np.stack([gravity, zero, cf * vx * delta / sigma, zero], -1)
         power, phi, gamma = np.broadcast_to(np.eye(4), matrix.shape), np.eye(4) + 0.0 * matrix, 0.0 * matrix
         for j in range(1, 5):
             gamma = gamma + power / math.factorial(j)
@@ -153,15 +159,25 @@ class SingleTrackFit:
                 state = np.stack([0.0 * r, r, cf * (delta[k] - a * r / vx[k]), cr * b * r / vx[k]], -1)
             states[k] = state
             state = (phi[k] @ state[..., None])[..., 0] + drift[k]
-        return states[..., 1] + gyro, (states[..., 2] + states[..., 3]) / m + ay_bias
+        tire_ay = (states[..., 2] + states[..., 3]) / m
+        return states[..., 1] + gyro, tire_ay + ay_bias, tire_ay - states[..., 1] * vx + gravity
 
     def channel_errors(self, theta: np.ndarray) -> dict:
-        """Per channel, the measured minus predicted values of the fitted ticks of every drive, (ticks, columns)."""
-        errors = {"yaw_rate": [], "ay": []}
-        for i, (drive, fitted) in enumerate(zip(self.drives, self.fitted)):
-            yaw, ay = self.predict(drive, i, theta)
+        """Per channel, the measured minus predicted values of the fitted ticks of every drive, (ticks, columns).
+
+        ``kinematic``: the measured ay less its bias minus ``v r + dvy/dt - g sin(bank)`` with the measured yaw
+        rate less its bias; only dvy/dt is the model's (small in most driving), so it holds in the tires'
+        nonlinear range too and is fitted on every settled tick."""
+        errors = {"yaw_rate": [], "ay": [], "kinematic": []}
+        gyro, ay_bias, speed = theta[4], theta[5], theta[6]
+        for i, (drive, fitted, settled) in enumerate(zip(self.drives, self.fitted, self.settled)):
+            yaw, ay, vy_rate = self.predict(drive, i, theta)
             errors["yaw_rate"].append((drive.yaw_rate[:, None] - yaw)[fitted])
             errors["ay"].append((drive.ay[:, None] - ay)[fitted])
+            gravity = GRAVITY * np.sin(theta[7 + i])
+            turning = drive.wheel_speed[:, None] * speed * (drive.yaw_rate[:, None] - gyro)
+            kinematic = drive.ay[:, None] - ay_bias - turning - vy_rate + gravity
+            errors["kinematic"].append(kinematic[settled])
         return {name: np.concatenate(parts) for name, parts in errors.items()}
 
     def residuals(self, theta: np.ndarray) -> np.ndarray:
