@@ -124,7 +124,7 @@ def test_replay_with_the_calibrated_config_is_as_good_as_with_the_true_one(drive
         assert with_calibrated[state] <= 1.15 * with_true[state], state
         assert with_wrong[state] > 1.5 * with_true[state], state  # the calibration mattered
     # vx falls short of issue 17's 15 %: the estimator's vx follows the wheel radius, which the fit recovers within
-    # 0.3-0.7 % (the issue's bound is 10 %) while 15 % of the true config's RMSE (0.02 m/s) would need 0.05 %;
+    # 0.2-0.4 % (the issue's bound is 10 %) while 15 % of the true config's RMSE (0.02 m/s) would need 0.05 %;
     # what is asserted is that the calibration removes most of the wrong radius's error (README "Calibration")
     assert with_calibrated["vx"] < 0.3 * with_wrong["vx"]
 
