@@ -23,6 +23,7 @@ COMMANDS = {
     "batch": "replay many logs on a Dask cluster and summarize the fleet",
     "check": "validate config and DBCs, print the resolved signal map",
     "init": "write a starting config from a DBC (or an opendbc car)",
+    "calibrate": "fit stiffnesses, steering, wheel radius and sensor biases to logged drives",
 }
 
 DESCRIPTION = """canest: online vehicle state estimation on CAN.

@@ -161,8 +161,9 @@ def starting_config(given_dbc: str | None, car: str | None = None, out=None) -> 
     return text, found
 
 
-def write_new(path, text: str) -> None:
-    """``text`` into a new file ``path`` (``-``: standard output); an existing file is never replaced.
+def write_new(path, text: str, command: str = "init") -> None:
+    """``text`` into a new file ``path`` (``-``: standard output); an existing file is never replaced
+    (``command`` says who in the error).
 
     Staged beside the name and linked under it, which fails if the name exists (no race with another writer)."""
     if is_stdio(path):
@@ -170,14 +171,14 @@ def write_new(path, text: str) -> None:
             handle.write(text)
         return
     if os.path.lexists(path):
-        raise OutputFileError(f"{path}: exists; init never replaces a file: choose another --out or move it away")
+        raise OutputFileError(f"{path}: exists; {command} never replaces a file: choose another --out or move it away")
     output = OutputFile(path)
     try:
         with open(output.write_path, "w", encoding="utf-8") as handle:
             handle.write(text)
         os.link(output.write_path, output.target)
     except FileExistsError:
-        raise OutputFileError(f"{path}: exists; init never replaces a file: choose another --out or move it "
+        raise OutputFileError(f"{path}: exists; {command} never replaces a file: choose another --out or move it "
                               "away") from None
     except OSError as exc:
         raise output.error(exc) from None

@@ -12,6 +12,7 @@ from canest.commands.common import FORMATTER, add_config, config_from_args
 from canest.io.outputs import OutputFile, check_outputs, is_stdio
 from canest.io.sinks import open_frame_writer
 from canest.sim.maneuvers import MANEUVERS
+from canest.sim.mismatch import PlantMismatch
 from canest.sim.simulate import simulate
 
 EPILOG = """examples:
@@ -20,7 +21,12 @@ EPILOG = """examples:
   canest simulate --maneuver step --mu 0.85,0.85,0.3,0.3 --out split.log --truth split.csv
   canest simulate --maneuver sine --speed 60 --mu 0.85 --mu-jump 6:0.35 --out jump.log --truth jump.csv
   canest simulate --out - --truth truth.csv | canest replay - --csv est.csv    # candump text through a pipe
+  canest simulate -m country --seed 3 --stiffness-scale 0.7,1.3 --steering-offset 1.5 --steering-ratio-scale 1.08 \
+      --gyro-bias 0.5 --ay-bias 0.2 --wheel-radius-scale 1.03 --bank 3 -o wrong.log --truth wrong.csv
 
+The car options (--stiffness-scale ... --bank) make the simulated car differ
+from the config, which then is wrong the way a real car's config is (what
+`canest calibrate` corrects); the log is still encoded through the config.
 The log is encoded through the config's input DBC and signal map, each message
 at its DBC cycle time; its format follows the suffix (.log candump, .asc,
 .blf, .trc, .csv, .mf4), candump text on standard output for --out -. The
@@ -41,7 +47,9 @@ def register(subparsers) -> None:
     add_config(p)
     p.add_argument("--maneuver", "-m", choices=MANEUVERS, default="dlc",
                    help="dlc: ISO 3888-1 double lane change; slalom; sine: 4 s period steering; step; "
-                        "launch: straight acceleration ramp with traction control (default dlc)")
+                        "launch: straight acceleration ramp with traction control; country: a minute of country "
+                        "road drawn from --seed, bends both ways, straights, braking and accelerating at "
+                        "50-100 km/h (default dlc)")
     p.add_argument("--speed", type=float, default=80.0,
                    help=f"target speed in km/h, {MIN_SPEED_KMH:g} to {MAX_SPEED_KMH:g} (default 80)")
     p.add_argument("--mu", default="0.85", help="road friction, one value or four (fl,fr,rl,rr) (default 0.85)")
@@ -56,6 +64,20 @@ def register(subparsers) -> None:
                    help="probability per sample of a heavy-tailed (Student-t) outlier (default 0)")
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     p.add_argument("--start-time", type=float, default=0.0, help="timestamp of the first frame in s (default 0)")
+    car = p.add_argument_group("the simulated car, where it differs from the config")
+    car.add_argument("--stiffness-scale", default="1,1", metavar="FRONT,REAR",
+                     help="the tires' cornering stiffness, times the plant's own, front and rear (default 1,1)")
+    car.add_argument("--steering-ratio-scale", type=float, default=1.0,
+                     help="true steering ratio / config's (default 1)")
+    car.add_argument("--wheel-radius-scale", type=float, default=1.0,
+                     help="true effective wheel radius / config's (default 1)")
+    car.add_argument("--steering-offset", type=float, metavar="DEG",
+                     help="steering wheel angle sensor bias in deg (measured = true + offset; default the sensor's)")
+    car.add_argument("--gyro-bias", type=float, metavar="DEG/S", help="yaw rate sensor bias in deg/s (default 0.05)")
+    car.add_argument("--ay-bias", type=float, metavar="M/S2",
+                     help="lateral accelerometer bias in m/s^2 (default -0.03)")
+    car.add_argument("--bank", type=float, default=0.0, metavar="DEG",
+                     help="road bank in deg, positive when the road falls to the left (default 0)")
     p.add_argument("--out", "-o", required=True, help="CAN log to write (- for candump text on standard output)")
     p.add_argument("--truth", required=True, help="truth CSV to write")
     p.set_defaults(func=run)
@@ -85,9 +107,34 @@ def parse_mu_jump(text):
     return jump_time, parse_mu(mu)
 
 
+SCALE_RANGE = (0.3, 3.0)  # a car's stiffness, ratio or radius off by more is another car
+MAX_BANK_DEG = 15.0
+
+
+def parse_mismatch(args) -> PlantMismatch:
+    """The car options as a :class:`PlantMismatch`, each within a range a car can be off by."""
+    try:
+        scales = [float(v) for v in args.stiffness_scale.split(",")]
+    except ValueError:
+        scales = []
+    low, high = SCALE_RANGE
+    if len(scales) != 2:
+        raise UsageError(f"--stiffness-scale: expected FRONT,REAR (two numbers), got '{args.stiffness_scale}'")
+    for option, values in (("--stiffness-scale", scales), ("--steering-ratio-scale", [args.steering_ratio_scale]),
+                           ("--wheel-radius-scale", [args.wheel_radius_scale])):
+        if not all(low <= v <= high for v in values):  # also refuses nan
+            raise UsageError(f"{option}: a factor from {low:g} to {high:g}, got {', '.join(map(str, values))}")
+    if not abs(args.bank) <= MAX_BANK_DEG:
+        raise UsageError(f"--bank: degrees from -{MAX_BANK_DEG:g} to {MAX_BANK_DEG:g}, got {args.bank}")
+    radians = lambda value: None if value is None else math.radians(value)  # noqa: E731
+    return PlantMismatch(scales[0], scales[1], args.steering_ratio_scale, args.wheel_radius_scale,
+                         radians(args.steering_offset), radians(args.gyro_bias), args.ay_bias, math.radians(args.bank))
+
+
 def run(args) -> int:
     config = config_from_args(args)
     mu = parse_mu(args.mu)
+    mismatch = parse_mismatch(args)
     mu_jump = parse_mu_jump(args.mu_jump)
     if not 0.0 <= args.outliers < 1.0:
         raise UsageError(f"--outliers: a probability per sample in [0, 1), got {args.outliers}")
@@ -109,7 +156,8 @@ def run(args) -> int:
             result = simulate(config, args.maneuver, args.speed, mu, duration=args.duration,
                               amplitude_deg=args.amplitude, seed=args.seed, noise_scale=args.noise_scale,
                               outliers=args.outliers, start_time=args.start_time, channel=config.input_bus.channel,
-                              progress=lambda f: bar.update(round(100 * f) - bar.n), mu_jump=mu_jump)
+                              progress=lambda f: bar.update(round(100 * f) - bar.n), mu_jump=mu_jump,
+                              mismatch=mismatch)
         for output, write in zip(outputs, (write_log, write_truth)):
             try:
                 write(result, output)

@@ -8,6 +8,9 @@ drives straight and asks for an acceleration ramping up to ``amplitude`` m/s^2
 (default 6) over 3 s, then coasts, with a traction control that takes torque
 off a wheel whose slip ratio passes ``TRACTION_SLIP``: on a low-friction road the
 driven tires reach their limit (the longitudinal excitation friction needs).
+``country`` is a minute of country road drawn from its seed (:func:`country_road`):
+the road's curvature and a target speed as functions of time, the driver steering
+the curvature with the single-track feedforward at the speed it actually drives.
 """
 from __future__ import annotations
 
@@ -49,11 +52,69 @@ class Maneuver:
     steering_wheel: Optional[Callable[[float], float]] = None  # swa(t), rad
     acceleration: Optional[Callable[[float], float]] = None  # open-loop acceleration demand(t), m/s^2
     start_x: float = 0.0
+    curvature: Optional[Callable[[float], float]] = None  # road curvature(t), 1/m (positive: a left bend)
+    speed: Optional[Callable[[float], float]] = None  # target speed(t), m/s; None: the constant target speed
 
 
-def make_maneuver(name: str, speed: float, amplitude_deg: Optional[float] = None, duration: Optional[float] = None) -> Maneuver:
-    """Build a maneuver for a target speed (m/s). ``amplitude_deg`` is the steering wheel amplitude of sine/step."""
+# country: segments of straight and bend, each bend's curvature giving a lateral acceleration in COUNTRY_AY at the
+# segment's target speed, drawn in COUNTRY_SPEEDS; the speed changes over the straight before (braking, accelerating)
+COUNTRY_SPEEDS = (50.0 / 3.6, 100.0 / 3.6)  # m/s
+COUNTRY_AY = (1.0, 3.5)  # m/s^2: within the linear tire range, where the single-track model holds
+COUNTRY_STRAIGHT = (2.0, 5.0)  # s
+COUNTRY_BEND = (3.0, 7.0)  # s
+COUNTRY_TRANSITION = 1.2  # s of clothoid into and out of a bend
+COUNTRY_AX = 1.5  # m/s^2: the peak braking or acceleration of a speed change
+COUNTRY_DURATION = 60.0  # s
+
+
+def _profile(times, values, ramps) -> Callable[[float], float]:
+    """A function of time that holds ``values[i]`` from ``times[i]`` on, with a smooth ramp of ``ramps[i]`` s
+    from the value before."""
+    def at(t: float) -> float:
+        level = values[0]
+        for start, previous, value, ramp in zip(times[1:], values, values[1:], ramps[1:]):
+            level += (value - previous) * _smoothstep(t, start, ramp)
+        return level
+    return at
+
+
+def _speed_ramp(change: float) -> float:
+    """Seconds of a smooth speed change of ``change`` m/s whose peak acceleration is ``COUNTRY_AX``."""
+    return max(math.pi / 2.0 * abs(change) / COUNTRY_AX, 1.0)
+
+
+def country_road(seed: int, start_speed: float, duration: float) -> tuple:
+    """(curvature(t), target speed(t)) of a country road drawn from ``seed``: straights and bends of both directions.
+
+    Bends alternate in direction but for a random repeat; each straight carries a new target speed (braking or
+    accelerating into the next bend)."""
+    rng = np.random.default_rng(seed)
+    low, high = COUNTRY_SPEEDS
+    times, curvatures, speed_times, speeds = [0.0], [0.0], [0.0], [min(max(start_speed, low), high)]
+    t, direction = LEAD_TIME, float(rng.choice((-1.0, 1.0)))
+    while t < duration:
+        speed = float(rng.uniform(low, high))
+        speed_times.append(t)
+        speeds.append(speed)
+        t += float(rng.uniform(*COUNTRY_STRAIGHT)) + _speed_ramp(speed - speeds[-2])
+        direction = -direction if rng.random() < 0.8 else direction
+        times.append(t)
+        curvatures.append(direction * float(rng.uniform(*COUNTRY_AY)) / speed**2)
+        t += float(rng.uniform(*COUNTRY_BEND))
+        times.append(t)
+        curvatures.append(0.0)
+    speed_ramps = [0.0, *(_speed_ramp(b - a) for a, b in zip(speeds, speeds[1:]))]
+    return _profile(times, curvatures, [COUNTRY_TRANSITION] * len(times)), _profile(speed_times, speeds, speed_ramps)
+
+
+def make_maneuver(name: str, speed: float, amplitude_deg: Optional[float] = None, duration: Optional[float] = None,
+                  seed: int = 0) -> Maneuver:
+    """Build a maneuver for a target speed (m/s). ``amplitude_deg`` is the steering wheel amplitude of sine/step;
+    ``seed`` draws the country road (its start speed is ``speed``, within 50-100 km/h)."""
     lead = LEAD_TIME * speed
+    if name == "country":
+        curvature, target = country_road(seed, speed, duration or COUNTRY_DURATION)
+        return Maneuver(name, duration or COUNTRY_DURATION, curvature=curvature, speed=target)
     if name == "dlc":
         length = sum(DLC_SECTIONS)
         return Maneuver(name, duration or LEAD_TIME + length / max(speed, 1.0) + 1.5, path=iso3888_path, start_x=-lead)
@@ -80,7 +141,7 @@ def make_maneuver(name: str, speed: float, amplitude_deg: Optional[float] = None
     raise ValueError(f"unknown maneuver '{name}'; choose one of {', '.join(MANEUVERS)}")
 
 
-MANEUVERS = ("dlc", "slalom", "sine", "step", "launch")
+MANEUVERS = ("dlc", "slalom", "sine", "step", "launch", "country")
 
 
 class Driver:
@@ -107,11 +168,14 @@ class Driver:
         m = self.maneuver
         if m.steering_wheel is not None:
             return m.steering_wheel(t)
-        preview = max(self.MIN_PREVIEW, self.PREVIEW_TIME * vx)
-        target_x = x + preview * math.cos(psi)
-        dx, dy = target_x - x, m.path(target_x) - y
-        lateral = -dx * math.sin(psi) + dy * math.cos(psi)
-        command = math.atan(2.0 * self.p.wheelbase * lateral / preview**2)
+        if m.curvature is not None:  # single-track feedforward: road wheel angle = kappa (L + K_us v^2)
+            command = m.curvature(t) * (self.p.wheelbase + self.p.understeer_gradient * vx**2)
+        else:
+            preview = max(self.MIN_PREVIEW, self.PREVIEW_TIME * vx)
+            target_x = x + preview * math.cos(psi)
+            dx, dy = target_x - x, m.path(target_x) - y
+            lateral = -dx * math.sin(psi) + dy * math.cos(psi)
+            command = math.atan(2.0 * self.p.wheelbase * lateral / preview**2)
         self.delta += (command - self.delta) * min(dt / self.STEER_LAG, 1.0)
         return self.delta * self.p.steering_ratio
 
@@ -122,7 +186,7 @@ class Driver:
             demand = self.maneuver.acceleration(t)
             drag = 0.0 if demand == 0.0 else drag
         else:
-            error = self.target_speed - vx
+            error = (self.target_speed if self.maneuver.speed is None else self.maneuver.speed(t)) - vx
             self.speed_integral += error * dt
             demand = self.SPEED_GAIN * error + self.SPEED_INTEGRAL * self.speed_integral
         total = self.p.mass * demand * self.p.wheel_radius + drag * self.p.wheel_radius

@@ -21,6 +21,7 @@ from canest.errors import SimulationError
 from canest.settings import Config
 from canest.signals import WHEELS
 from canest.sim.maneuvers import Driver, make_maneuver
+from canest.sim.mismatch import PlantMismatch, true_vehicle
 from canest.sim.plant import PSI, R, VX, VY, W, X, Y, TwoTrackPlant
 from canest.sim.sensors import SensorModel
 
@@ -63,18 +64,23 @@ def _true_inputs(state, outputs, swa, torque) -> dict:
 
 def simulate(config: Config, maneuver: str, speed_kmh: float, mu, *, duration=None, amplitude_deg=None,
              seed: int = 0, noise_scale: float = 1.0, outliers: float = 0.0, start_time: float = 0.0,
-             channel: str = "vcan0", progress=None, mu_jump=None, vibration: float = 0.0) -> Simulation:
+             channel: str = "vcan0", progress=None, mu_jump=None, vibration: float = 0.0,
+             mismatch: PlantMismatch = PlantMismatch()) -> Simulation:
     """Simulate one run; ``mu`` is a scalar or four per-wheel friction coefficients.
+
+    ``mismatch``: how the simulated car differs from ``config`` (:mod:`canest.sim.mismatch`); the frames are
+    encoded through ``config``, so a replay with it runs on a wrong config.
 
     ``mu_jump = (t, mu)``: the road's friction changes to ``mu`` (scalar or four) at ``t`` s into the run.
     ``vibration``: scale of the IMU's body vibration and road spikes (:mod:`canest.sim.sensors`; 0 none).
     """
     rng = np.random.default_rng(seed)
     speed = speed_kmh / 3.6
-    plan = make_maneuver(maneuver, speed, amplitude_deg, duration)
-    plant = TwoTrackPlant(config.vehicle, mu)
-    driver = Driver(config.vehicle, plan, speed)
-    sensors = SensorModel(rng, noise_scale, outliers, vibration=vibration)
+    plan = make_maneuver(maneuver, speed, amplitude_deg, duration, seed)
+    vehicle = true_vehicle(config.vehicle, mismatch)
+    plant = TwoTrackPlant(vehicle, mu, mismatch.tire(), mismatch.bank_acceleration)
+    driver = Driver(vehicle, plan, speed)
+    sensors = SensorModel(rng, noise_scale, outliers, mismatch.sensor_errors(), vibration=vibration)
     encoder = InputEncoder(config)
     state = plant.initial_state(speed)
     state[X] = plan.start_x
@@ -94,7 +100,7 @@ def simulate(config: Config, maneuver: str, speed_kmh: float, mu, *, duration=No
         if k % control_every == 0:
             swa = driver.steering_wheel_angle(t, state[X], state[Y], state[PSI], state[VX], CONTROL_DT)
             torque = driver.motor_torques(t, state[VX], state[W], CONTROL_DT)
-        delta = swa / config.vehicle.steering_ratio
+        delta = swa / vehicle.steering_ratio
         _, outputs = plant.derivatives(state, delta, torque)
         if k % truth_every == 0:
             rows.append(_truth_row(t + start_time, state, outputs, delta, swa, plant.mu, torque))

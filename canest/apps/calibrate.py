@@ -1,0 +1,233 @@
+"""Offline calibration: the vehicle and sensor parameters that make the single-track model fit logged drives.
+
+Output error: the linear single-track model (states vy, yaw rate and the two
+axles' lateral forces, which follow their slip angles over the config's tire
+``relaxation_length``; RK4 at
+:data:`canest.apps.drive_signals.STEP`) is driven by the measured steering
+wheel angle and wheel speed of every log and predicts the measured yaw rate
+and lateral acceleration; :func:`scipy.optimize.least_squares` moves the
+parameters until the predictions fit, over all logs at once; a third channel
+is the kinematic identity ``ay - ay_bias = v r + dvy/dt - g sin(bank)`` with the
+measured yaw rate (only dvy/dt is the model's), which holds beyond the tires'
+linear range too:
+
+- ``front``, ``rear``: each axle's cornering stiffness, a factor on the config's;
+- ``ratio``: the steering ratio, a factor on the config's;
+- ``steering_offset``: what the steering angle sensor reads when the wheels stand straight (rad);
+- ``gyro_bias``, ``ay_bias``: the yaw rate and lateral acceleration sensors' (rad/s, m/s^2);
+- ``speed``: the true speed over the wheel speeds times the config's radius: the effective wheel radius's factor;
+- ``bank`` of each log: the road's tilt, positive falling to the left (gravity ``g sin(bank)`` in dvy/dt, not in
+  the measured ay).
+
+Identifiability (what one drive can tell apart). The steady state of a bend
+says ``(swa - offset) / ratio = L r / v + K_us (ay - ay_bias)`` and
+``ay - ay_bias = v r - g sin(bank)``; with r and v varying over a drive this
+separates the gyro bias (it enters ``L r / v`` as ``1/v``), the ratio (the
+``L r / v`` term against the ``K_us ay`` term), the wheel radius (``v r``
+against ay), and the understeer gradient, one combination of the two
+stiffnesses; the transients of bend entries and speed changes give their
+sum. But the constants are three (steering offset, ay bias, bank) and the
+equations two: ``offset / ratio - K_us ay_bias`` and ``ay_bias - g sin(bank)``. No
+calibration from steering, yaw rate, ay and wheel speeds can tell a constant
+bank from an accelerometer bias, so the mean bank over the logs is held at 0
+(a strong prior, ``MEAN_BANK_STD``): each log's bank is its difference from
+the others', and the logs must share a flat road on average, e.g. the same
+road driven both ways. With a single log its bank is 0 and the ay bias
+carries its gravity. Every other parameter is left free (bounded to what a
+car can be off by); the confidence intervals say how well the drives pinned
+each down, their correlation which ones trade against each other.
+
+Ticks above ``LINEAR_AY`` are left out of the residuals (the model runs
+through them): fitting a line to the tires' curve there would read their
+saturation as less stiffness and, where the drive's ay is lopsided, as a
+steering offset (3-6 % and 0.3 deg on the simulator without the limit).
+
+The 95 % intervals come from the Jacobian at the solution, each channel
+weighted by its own residual RMS and widened by the residuals' correlation
+in time (an AR(1) fit: neighbouring 20 ms samples are not independent errors).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from canest.apps.drive_signals import STEP, Drive
+from canest.models.wheels import GRAVITY
+from canest.params import VehicleParams
+
+SETTLE = 1.0  # s at the start of each stretch left out of the fit: the model starts from vy = 0
+LINEAR_AY = 2.0  # m/s^2: ticks of more measured lateral acceleration are left out of the fit (the model still runs
+# through them): the tires' force there falls short of linear, by the curve and by the load transfer
+MEAN_BANK_STD = math.radians(0.01)  # rad: the prior that holds the logs' mean bank at 0
+CONFIDENCE = 1.96  # 95 % two-sided
+DIFF_STEP = 1e-6  # forward-difference step, in units of each parameter's scale
+
+
+@dataclass(frozen=True)
+class Parameter:
+    name: str
+    start: float
+    scale: float  # typical size of a change (least_squares x_scale, difference steps)
+    low: float
+    high: float
+
+
+SHARED = (
+    Parameter("front", 1.0, 0.1, 0.2, 5.0),
+    Parameter("rear", 1.0, 0.1, 0.2, 5.0),
+    Parameter("ratio", 1.0, 0.02, 0.5, 2.0),
+    Parameter("steering_offset", 0.0, math.radians(0.5), -math.radians(30.0), math.radians(30.0)),
+    Parameter("gyro_bias", 0.0, math.radians(0.1), -math.radians(5.0), math.radians(5.0)),
+    Parameter("ay_bias", 0.0, 0.05, -2.0, 2.0),
+    Parameter("speed", 1.0, 0.01, 0.8, 1.25),
+)
+BANK = Parameter("bank", 0.0, math.radians(0.5), -math.radians(15.0), math.radians(15.0))
+
+
+@dataclass
+class Fit:
+    names: list  # parameter names, the banks as bank[i]
+    values: np.ndarray
+    half_widths: np.ndarray  # 95 % confidence half-widths
+    correlation: np.ndarray
+    rms: dict  # channel -> residual RMS at the solution (yaw_rate rad/s, ay m/s^2)
+    seconds: float  # driving fitted
+
+    def value(self, name: str) -> float:
+        return float(self.values[self.names.index(name)])
+
+    def half_width(self, name: str) -> float:
+        return float(self.half_widths[self.names.index(name)])
+
+
+class SingleTrackFit:
+    """The output-error residuals of the drives for a matrix of parameter sets (one per column, vectorized)."""
+
+    def __init__(self, vehicle: VehicleParams, drives: list):
+        self.p = vehicle
+        self.drives = drives
+        self.parameters = [*SHARED, *(BANK for _ in drives)]
+        self.names = [*(p.name for p in SHARED), *(f"bank[{i}]" for i in range(len(drives)))]
+        self.scales = np.array([p.scale for p in self.parameters])
+        self.weights = {"yaw_rate": 1.0 / math.radians(0.3), "ay": 1.0 / 0.15, "kinematic": 1.0 / 0.15}
+        self.settled = [self._settled(d) for d in drives]
+        self.fitted = [settled & (np.abs(d.ay) < LINEAR_AY) for settled, d in zip(self.settled, drives)]
+
+    @staticmethod
+    def _settled(drive: Drive) -> np.ndarray:
+        """The ticks ``SETTLE`` s or more into their stretch."""
+        index = np.arange(len(drive.t))
+        since_start = index - np.maximum.accumulate(np.where(drive.starts, index, 0))
+        return since_start * STEP >= SETTLE
+
+    def predict(self, drive: Drive, bank_index: int, theta: np.ndarray):
+        """Predicted (yaw rate, ay, dvy/dt), each (ticks, columns), for parameter columns ``theta`` (n, columns).
+
+        The model is linear in its state ``(vy, r, Ff, Fr)`` with the inputs held over a tick, so each tick's RK4
+        step is the matrix ``Phi = sum (A dt)^j / j!`` (j to 4) and ``Gamma = dt sum (A dt)^j / (j + 1)!`` (j to 3)
+        on the constant input: built for all ticks at once, then one matrix product per tick."""
+        p = self.p
+        front, rear, ratio, offset, gyro, ay_bias, speed = theta[:7]
+        cf, cr = p.cornering_stiffness_front * front, p.cornering_stiffness_rear * rear
+        a, b, m, iz, sigma = p.cg_to_front, p.cg_to_rear, p.mass, p.yaw_inertia, p.tire.relaxation_length
+        delta = (drive.steering_wheel_angle[:, None] - offset) / (p.steering_ratio * ratio)
+        vx = drive.wheel_speed[:, None] * speed
+        ticks, columns = delta.shape
+        zero, one = np.zeros((ticks, columns)), np.ones((ticks, columns))
+        cf_t, cr_t = cf * one, cr * one
+        matrix = np.stack([
+            np.stack([zero, -vx, one / m, one / m], -1),
+            np.stack([zero, zero, a / iz * one, -b / iz * one], -1),
+            np.stack([-cf_t / sigma, -cf_t * a / sigma, -vx / sigma, zero], -1),
+            np.stack([-cr_t / sigma, cr_t * b / sigma, zero, -vx / sigma], -1)], -2) * STEP  # (ticks, columns, 4, 4)
+        gravity = GRAVITY * np.sin(theta[7 + bank_index]) * one
+        constant = np.stack([gravity, zero, cf * vx * delta / sigma, zero], -1)
+        power, phi, gamma = np.broadcast_to(np.eye(4), matrix.shape), np.eye(4) + 0.0 * matrix, 0.0 * matrix
+        for j in range(1, 5):
+            gamma = gamma + power / math.factorial(j)
+            power = power @ matrix
+            phi = phi + power / math.factorial(j)
+        drift = (gamma @ constant[..., None])[..., 0] * STEP
+        states = np.empty((ticks, columns, 4))
+        state = None
+        for k in range(ticks):
+            if drive.starts[k]:
+                r = drive.yaw_rate[k] - gyro
+                state = np.stack([0.0 * r, r, cf * (delta[k] - a * r / vx[k]), cr * b * r / vx[k]], -1)
+            states[k] = state
+            state = (phi[k] @ state[..., None])[..., 0] + drift[k]
+        tire_ay = (states[..., 2] + states[..., 3]) / m
+        return states[..., 1] + gyro, tire_ay + ay_bias, tire_ay - states[..., 1] * vx + gravity
+
+    def channel_errors(self, theta: np.ndarray) -> dict:
+        """Per channel, the measured minus predicted values of the fitted ticks of every drive, (ticks, columns).
+
+        ``kinematic``: the measured ay less its bias minus ``v r + dvy/dt - g sin(bank)`` with the measured yaw
+        rate less its bias; only dvy/dt is the model's (small in most driving), so it holds in the tires'
+        nonlinear range too and is fitted on every settled tick."""
+        errors = {"yaw_rate": [], "ay": [], "kinematic": []}
+        gyro, ay_bias, speed = theta[4], theta[5], theta[6]
+        for i, (drive, fitted, settled) in enumerate(zip(self.drives, self.fitted, self.settled)):
+            yaw, ay, vy_rate = self.predict(drive, i, theta)
+            errors["yaw_rate"].append((drive.yaw_rate[:, None] - yaw)[fitted])
+            errors["ay"].append((drive.ay[:, None] - ay)[fitted])
+            gravity = GRAVITY * np.sin(theta[7 + i])
+            turning = drive.wheel_speed[:, None] * speed * (drive.yaw_rate[:, None] - gyro)
+            kinematic = drive.ay[:, None] - ay_bias - turning - vy_rate + gravity
+            errors["kinematic"].append(kinematic[settled])
+        return {name: np.concatenate(parts) for name, parts in errors.items()}
+
+    def residuals(self, theta: np.ndarray) -> np.ndarray:
+        """Weighted residuals (rows) for each parameter column, with the mean-bank prior as the last row."""
+        errors = self.channel_errors(theta)
+        banks = theta[len(SHARED):]
+        prior = banks.mean(axis=0, keepdims=True) / MEAN_BANK_STD
+        return np.concatenate([errors[name] * self.weights[name] for name in errors] + [prior])
+
+    def jacobian(self, x: np.ndarray) -> np.ndarray:
+        steps = DIFF_STEP * self.scales
+        columns = np.column_stack([x, x[:, None] + np.diag(steps)])
+        values = self.residuals(columns)
+        return (values[:, 1:] - values[:, :1]) / steps
+
+
+def _widening(errors: np.ndarray) -> float:
+    """sqrt((1 + rho) / (1 - rho)) of the lag-1 autocorrelation rho: how much correlated errors widen an interval."""
+    centred = errors - errors.mean()
+    rho = float(np.dot(centred[1:], centred[:-1]) / max(np.dot(centred, centred), 1e-300))
+    rho = min(max(rho, 0.0), 0.999)
+    return math.sqrt((1.0 + rho) / (1.0 - rho))
+
+
+def calibrate(vehicle: VehicleParams, drives: list, progress=None) -> Fit:
+    """Fit the parameters (module docstring) to ``drives``; ``progress(evaluations)`` after each evaluation."""
+    model = SingleTrackFit(vehicle, drives)
+    x0 = np.array([p.start for p in model.parameters])
+    bounds = (np.array([p.low for p in model.parameters]), np.array([p.high for p in model.parameters]))
+    evaluations = 0
+
+    def fun(x):
+        nonlocal evaluations
+        evaluations += 1
+        if progress is not None:
+            progress(evaluations)
+        return model.residuals(x[:, None])[:, 0]
+
+    solution = x0
+    for _ in range(2):  # the second pass weights each channel by its own residual RMS of the first
+        result = least_squares(fun, solution, jac=lambda x: model.jacobian(x), bounds=bounds, x_scale=model.scales,
+                               method="trf", xtol=1e-10, ftol=1e-10, max_nfev=200)
+        solution = result.x
+        errors = {name: e[:, 0] for name, e in model.channel_errors(solution[:, None]).items()}
+        rms = {name: float(np.sqrt(np.mean(e**2))) for name, e in errors.items()}
+        model.weights = {name: 1.0 / max(value, 1e-9) for name, value in rms.items()}
+    jac = model.jacobian(solution)
+    covariance = np.linalg.pinv(jac.T @ jac)
+    widening = max(_widening(e) for e in errors.values())
+    std = np.sqrt(np.maximum(np.diag(covariance), 0.0)) * widening
+    correlation = covariance / np.outer(*(2 * [np.sqrt(np.maximum(np.diag(covariance), 1e-300))]))
+    seconds = float(sum(f.sum() for f in model.fitted) * STEP)
+    return Fit(model.names, solution, CONFIDENCE * std, correlation, rms, seconds)

@@ -1,0 +1,92 @@
+"""A logged drive as arrays on a regular grid: what ``canest calibrate`` fits the single-track model to.
+
+The log is decoded and held exactly as the daemon does it (:class:`canest.codec.decode.InputDecoder`,
+:class:`canest.resample.Resampler` on the :class:`canest.resample.TickClock` grid at ``STEP`` s), so the
+calibration sees the signals in the config's SI units, offsets applied. A tick where any input the fit needs
+is stale or saturated, or the car drives slower than ``MIN_SPEED``, is left out; the fit restarts its model
+after every such gap (``starts``).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from canest.codec.decode import InputDecoder
+from canest.errors import ConfigError, LogError
+from canest.estimation.inputs import WHEEL_SPEEDS, TickInputs
+from canest.io.logfiles import open_log
+from canest.resample import Resampler, TickClock
+from canest.settings import Config
+
+STEP = 0.02  # s: 50 Hz, fast enough for a car's yaw dynamics (eigenvalues below 15 1/s at 50-100 km/h)
+MIN_SPEED = 8.0  # m/s: slower, the slip angles are large and the linear single-track model does not hold
+NEEDED = ("steering_wheel_angle", "yaw_rate", "ay", *WHEEL_SPEEDS)
+MIN_SEGMENT = 2.0  # s: shorter stretches of usable driving are left out (their start transient is all they hold)
+
+
+@dataclass
+class Drive:
+    """One log's usable ticks: SI arrays of equal length, and where a new stretch starts."""
+
+    path: str
+    t: np.ndarray
+    steering_wheel_angle: np.ndarray  # rad
+    yaw_rate: np.ndarray  # rad/s
+    ay: np.ndarray  # m/s^2
+    wheel_speed: np.ndarray  # m/s: mean of the four wheels times the config's wheel radius
+    starts: np.ndarray  # bool: the first tick of a stretch
+
+    @property
+    def seconds(self) -> float:
+        return len(self.t) * STEP
+
+
+def check_signals(config: Config) -> None:
+    """The inputs the fit needs are mapped, else one line naming the config and what to add."""
+    missing = [name for name in NEEDED if name not in config.signals]
+    if missing:
+        raise ConfigError(f"{config.path}: input.signals: calibration needs {', '.join(missing)}; map them")
+
+
+def read_drive(config: Config, path, log_format=None, log_channel=None, progress=None) -> Drive:
+    """The log's usable ticks; a LogError (65) naming the log when it holds too little driving to fit."""
+    decoder = InputDecoder(config)
+    resampler = Resampler(config.signals, decoder.timeouts(config.estimator.timeout_cycles))
+    clock = TickClock(STEP)
+    rows, previous_tick = [], None
+    source = open_log(path, log_format, log_channel)
+    frames = iter(source)
+    try:
+        for count, msg in enumerate(frames, 1):
+            for tick in clock.due(msg.timestamp):
+                inputs = TickInputs(resampler.sample(tick))
+                usable = inputs.has(*NEEDED) and inputs.wheel_speed(config.vehicle.wheel_radius) >= MIN_SPEED
+                if usable:
+                    start = previous_tick is None or tick - previous_tick > 1.5 * STEP
+                    rows.append((tick, *(inputs.values[name] for name in NEEDED[:3]),
+                                 inputs.wheel_speed(config.vehicle.wheel_radius), start))
+                    previous_tick = tick
+            values = decoder.decode(msg)
+            for name, value in values or ():
+                resampler.hold(name, value, msg.timestamp, name in decoder.last_saturated)
+            if progress is not None and count % 5000 == 0:
+                progress(source.position())
+    finally:
+        frames.close()
+        source.stop()
+    table = np.array(rows, dtype=float).reshape(-1, 6)
+    keep = _long_stretches(table[:, 5].astype(bool))
+    table = table[keep]
+    if len(table) * STEP < 2 * MIN_SEGMENT:
+        raise LogError(f"{path}: {len(table) * STEP:.1f} s of usable driving (all of steering, yaw rate, ay and "
+                       f"the four wheel speeds, above {MIN_SPEED:g} m/s); calibration needs at least "
+                       f"{2 * MIN_SEGMENT:g} s, better a minute of bends and straights")
+    return Drive(str(path), *table[:, :5].T, table[:, 5].astype(bool))
+
+
+def _long_stretches(starts: np.ndarray) -> np.ndarray:
+    """The ticks of stretches at least ``MIN_SEGMENT`` long."""
+    ids = np.cumsum(starts)
+    lengths = np.bincount(ids)
+    return lengths[ids] * STEP >= MIN_SEGMENT

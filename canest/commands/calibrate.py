@@ -1,0 +1,100 @@
+"""canest calibrate: fit the car's stiffnesses, steering, wheel radius and sensor biases to logged drives."""
+from __future__ import annotations
+
+import math
+import sys
+from pathlib import Path
+
+from tqdm import tqdm
+
+from canest.apps.calibrate import SHARED, calibrate
+from canest.apps.calibrated_config import bank_lines, check_new, write_calibrated
+from canest.apps.drive_signals import check_signals, read_drive
+from canest.commands.common import FORMATTER, add_config, add_log_reading, config_from_args, log_reading
+from canest.config import DEFAULT_CONFIG
+from canest.io.outputs import check_outputs
+
+EPILOG = """examples:
+  canest calibrate drive1.log drive2.log drive3.log --config my_car.yaml --out my_car.calibrated.yaml
+  canest calibrate 'logs/*.blf' --config my_car.yaml          # print the fit only
+
+Fits the linear single-track model to every log at once (output error, scipy
+least squares): each axle's cornering stiffness, the steering ratio and the
+steering angle sensor's offset, the gyro and lateral accelerometer biases, the
+effective wheel radius, and each log's road bank. Each value is printed with
+its 95 % confidence interval. A constant bank cannot be told from an ay bias:
+the logs' mean bank is taken as 0 (drive a road both ways, or flat roads; one
+log: its bank is 0). Best data: a few minutes of country road at 50-100 km/h,
+bends of both directions, straights, braking and accelerating, below 4 m/s^2
+of lateral acceleration. --out writes the config with the calibrated values,
+each commented (never over an existing file); `canest check --config` loads it."""
+
+UNITS = {  # parameter -> (config key or label, unit, factor from the fit's value)
+    "front": ("cornering_stiffness_front", "N/rad"), "rear": ("cornering_stiffness_rear", "N/rad"),
+    "ratio": ("steering_ratio", "-"), "speed": ("wheel_radius", "m"),
+    "steering_offset": ("steering offset", "deg"), "gyro_bias": ("gyro bias", "deg/s"), "ay_bias": ("ay bias", "m/s^2"),
+}
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser("calibrate",
+                              help="fit stiffnesses, steering, wheel radius and sensor biases to logged drives",
+                              description=__doc__, epilog=EPILOG, formatter_class=FORMATTER)
+    p.add_argument("logs", nargs="+", metavar="LOG", help="logged drives (any format replay reads)")
+    add_config(p)
+    add_log_reading(p)
+    p.add_argument("--out", "-o", help="write the config with the calibrated values to this new file")
+    p.set_defaults(func=run)
+
+
+def parameter_rows(config, fit) -> list:
+    """(label, config value, calibrated value, 95 % half-width, unit) of each shared parameter."""
+    v = config.vehicle
+    bases = {"front": v.cornering_stiffness_front, "rear": v.cornering_stiffness_rear, "ratio": v.steering_ratio,
+             "speed": v.wheel_radius}
+    rows = []
+    for parameter in SHARED:
+        label, unit = UNITS[parameter.name]
+        value, half = fit.value(parameter.name), fit.half_width(parameter.name)
+        if parameter.name in bases:
+            base = bases[parameter.name]
+            rows.append((label, base, base * value, base * half, unit))
+        else:
+            factor = 1.0 if unit == "m/s^2" else math.degrees(1.0)
+            rows.append((label, 0.0, value * factor, half * factor, unit))
+    return rows
+
+
+def format_fit(config, fit, logs: list) -> list:
+    """The report's lines: what was fitted over how much driving, each value with its interval, the banks."""
+    lines = [f"calibrated {config.vehicle.name} over {len(logs)} log(s), {fit.seconds:.0f} s of driving; residual "
+             f"RMS yaw rate {math.degrees(fit.rms['yaw_rate']):.3f} deg/s, ay {fit.rms['ay']:.3f} m/s^2",
+             f"  {'parameter':<28} {'config':>12} {'calibrated':>12} {'95 % CI':>12}  unit"]
+    for label, base, value, half, unit in parameter_rows(config, fit):
+        lines.append(f"  {label:<28} {base:>12.6g} {value:>12.6g} {'+-' + format(half, '.3g'):>12}  {unit}")
+    lines += bank_lines(fit, logs)
+    lines.append("  (the logs' mean bank is held at 0: a constant bank cannot be told from an ay bias)")
+    return lines
+
+
+def run(args) -> int:
+    config = config_from_args(args)
+    check_signals(config)
+    if args.out:
+        check_outputs({"--out": args.out}, {"the config": args.config or DEFAULT_CONFIG,
+                                            "the input DBC": config.input_dbc, "the output DBC": config.output_dbc,
+                                            **{f"log {i + 1}": log for i, log in enumerate(args.logs)}})
+        check_new(args.out)
+    show = sys.stderr.isatty()
+    drives = []
+    for log in tqdm(args.logs, desc="read logs", unit="log", disable=not show, leave=False):
+        drives.append(read_drive(config, log, **log_reading(args)))
+    with tqdm(desc="fit", unit=" evaluations", disable=not show, leave=False) as bar:
+        fit = calibrate(config.vehicle, drives, progress=lambda n: bar.update(n - bar.n))
+    lines = format_fit(config, fit, args.logs)
+    print("\n".join(lines))
+    if args.out:
+        header = [f"canest calibrate of {Path(config.path).name} over {', '.join(map(str, args.logs))}", *lines]
+        write_calibrated(config, fit, args.out, header)
+        print(f"wrote the calibrated config to {args.out}")
+    return 0

@@ -1,0 +1,91 @@
+"""A simulated car that differs from its config: the "wrong config" a calibration has to correct.
+
+The config describes the car as its user believes it is; :class:`PlantMismatch`
+says how the simulated car really is: cornering stiffnesses scaled (the plant's
+Magic Formula tire, :class:`canest.sim.tire.TireParams`), a steering ratio and an
+effective wheel radius off by a factor, sensor biases (steering wheel angle,
+gyro, lateral accelerometer) in place of the defaults of
+:mod:`canest.sim.sensors`, and a road bank: a constant tilt of the road about
+the car's x axis, positive when the road falls to the left, so that gravity
+pulls the car to the left with ``g sin(bank)`` (which the accelerometer, measuring
+the tires' force, does not see). :func:`true_vehicle` gives the parameters of the
+car the plant drives, as a config would state them were it right, :func:`true_fit` the
+calibration that would be exact.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from canest.apps.calibrate import SHARED, Fit
+from canest.models.wheels import GRAVITY, WheelGeometry
+from canest.params import VehicleParams
+from canest.sim.sensors import DEFAULT_SENSORS, SensorError
+from canest.sim.tire import TireParams
+
+
+@dataclass(frozen=True)
+class PlantMismatch:
+    """How the simulated car differs from its config; the defaults change nothing. Angles in rad, SI."""
+
+    stiffness_scale_front: float = 1.0
+    stiffness_scale_rear: float = 1.0
+    steering_ratio_scale: float = 1.0
+    wheel_radius_scale: float = 1.0
+    steering_offset: float | None = None  # rad at the steering wheel: measured = true + offset
+    gyro_bias: float | None = None  # rad/s
+    ay_bias: float | None = None  # m/s^2
+    bank: float = 0.0  # rad
+
+    def tire(self, tire: TireParams = TireParams()) -> TireParams:
+        """The plant's tire with the lateral stiffnesses scaled."""
+        return dataclasses.replace(tire,
+                                   lateral_stiffness_front=tire.lateral_stiffness_front * self.stiffness_scale_front,
+                                   lateral_stiffness_rear=tire.lateral_stiffness_rear * self.stiffness_scale_rear)
+
+    def sensor_errors(self) -> dict:
+        """The sensor error table with the biases this mismatch sets (noise as by default)."""
+        errors = dict(DEFAULT_SENSORS)
+        for name, bias in (("steering_wheel_angle", self.steering_offset), ("yaw_rate", self.gyro_bias),
+                           ("ay", self.ay_bias)):
+            if bias is not None:
+                errors[name] = SensorError(errors[name].noise, bias)
+        return errors
+
+    @property
+    def bank_acceleration(self) -> float:
+        """Gravity's component along the car's y axis, m/s^2."""
+        return GRAVITY * math.sin(self.bank)
+
+
+def true_vehicle(config_vehicle: VehicleParams, mismatch: PlantMismatch,
+                 tire: TireParams = TireParams()) -> VehicleParams:
+    """The car the plant drives: ratio and wheel radius scaled, and the axle cornering stiffnesses of its tire
+    at static load (what a right config would say)."""
+    geometry = WheelGeometry(config_vehicle)
+    loads = geometry.static_load
+    scaled = mismatch.tire(tire)
+    return dataclasses.replace(
+        config_vehicle,
+        steering_ratio=config_vehicle.steering_ratio * mismatch.steering_ratio_scale,
+        wheel_radius=config_vehicle.wheel_radius * mismatch.wheel_radius_scale,
+        cornering_stiffness_front=float(scaled.lateral_stiffness_front * loads[:2].sum()),
+        cornering_stiffness_rear=float(scaled.lateral_stiffness_rear * loads[2:].sum()))
+
+
+def true_fit(config_vehicle: VehicleParams, mismatch: PlantMismatch, banks=(0.0,)) -> Fit:
+    """The calibration that would be exact for this car (intervals 0), in the terms of :mod:`canest.apps.calibrate`;
+    ``banks`` (rad) per log. Written with :func:`canest.apps.calibrated_config.write_calibrated` it is the right
+    config, the baseline a calibrated one is measured against."""
+    truth = true_vehicle(config_vehicle, mismatch)
+    values = {"front": truth.cornering_stiffness_front / config_vehicle.cornering_stiffness_front,
+              "rear": truth.cornering_stiffness_rear / config_vehicle.cornering_stiffness_rear,
+              "ratio": mismatch.steering_ratio_scale, "speed": mismatch.wheel_radius_scale,
+              "steering_offset": mismatch.steering_offset or 0.0, "gyro_bias": mismatch.gyro_bias or 0.0,
+              "ay_bias": mismatch.ay_bias or 0.0}
+    names = [*(p.name for p in SHARED), *(f"bank[{i}]" for i in range(len(banks)))]
+    return Fit(names, np.array([*(values[p.name] for p in SHARED), *banks]), np.zeros(len(names)),
+               np.eye(len(names)), {}, 0.0)
