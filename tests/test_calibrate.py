@@ -147,3 +147,21 @@ def test_errors_name_the_file_and_exit_by_kind(drives, tmp_path):
     assert taken.returncode == 73 and "never replaces" in taken.stderr
     for result in (missing, unreadable, too_little, taken):
         assert result.stderr.count("\n") == 1 and result.stderr.startswith("canest: error: ")
+
+
+def test_a_damaged_log_is_calibrated_as_far_as_it_reads_with_a_warning_naming_it(drives, tmp_path):
+    log = drives[1][0][0]
+    cut = tmp_path / "cut.log"
+    cut.write_bytes(log.read_bytes()[: log.stat().st_size * 2 // 3])  # a logger stopped mid-line
+    result = canest("calibrate", cut, "--config", CONFIG)
+    assert result.returncode == 0, result.stderr
+    assert result.stderr.startswith("canest: warning: ") and "cut.log" in result.stderr and "cut mid-write" in result.stderr
+    assert "road bank of" in result.stdout and "95 % CI" in result.stdout
+
+
+def test_the_simulated_cars_options_are_checked(tmp_path):
+    for option, value, says in (("--stiffness-scale", "0.7", "FRONT,REAR"), ("--bank", "40", "degrees from -15"),
+                                ("--wheel-radius-scale", "nan", "a factor from")):
+        result = canest("simulate", "--config", CONFIG, "-m", "country", option, value, "-o", tmp_path / "x.log",
+                        "--truth", tmp_path / "x.csv")
+        assert result.returncode == 2 and says in result.stderr and result.stderr.count("\n") == 1, result.stderr

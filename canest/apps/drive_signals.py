@@ -8,6 +8,7 @@ after every such gap (``starts``).
 """
 from __future__ import annotations
 
+import logging
 from dataclasses import dataclass
 
 import numpy as np
@@ -22,6 +23,7 @@ from canest.settings import Config
 STEP = 0.02  # s: 50 Hz, fast enough for a car's yaw dynamics (eigenvalues below 15 1/s at 50-100 km/h)
 MIN_SPEED = 8.0  # m/s: slower, the slip angles are large and the linear single-track model does not hold
 NEEDED = ("steering_wheel_angle", "yaw_rate", "ay", *WHEEL_SPEEDS)
+LOG = logging.getLogger("canest.calibrate")
 MIN_SEGMENT = 2.0  # s: shorter stretches of usable driving are left out (their start transient is all they hold)
 
 
@@ -49,8 +51,9 @@ def check_signals(config: Config) -> None:
         raise ConfigError(f"{config.path}: input.signals: calibration needs {', '.join(missing)}; map them")
 
 
-def read_drive(config: Config, path, log_format=None, log_channel=None, progress=None) -> Drive:
-    """The log's usable ticks; a LogError (65) naming the log when it holds too little driving to fit."""
+def read_drive(config: Config, path, log_format=None, log_channel=None) -> Drive:
+    """The log's usable ticks; a LogError (65) naming the log when it holds too little driving to fit.
+    What the reader could not read is a warning naming the log, as in a replay."""
     decoder = InputDecoder(config)
     resampler = Resampler(config.signals, decoder.timeouts(config.estimator.timeout_cycles))
     clock = TickClock(STEP)
@@ -58,7 +61,7 @@ def read_drive(config: Config, path, log_format=None, log_channel=None, progress
     source = open_log(path, log_format, log_channel)
     frames = iter(source)
     try:
-        for count, msg in enumerate(frames, 1):
+        for msg in frames:
             for tick in clock.due(msg.timestamp):
                 inputs = TickInputs(resampler.sample(tick))
                 usable = inputs.has(*NEEDED) and inputs.wheel_speed(config.vehicle.wheel_radius) >= MIN_SPEED
@@ -70,11 +73,11 @@ def read_drive(config: Config, path, log_format=None, log_channel=None, progress
             values = decoder.decode(msg)
             for name, value in values or ():
                 resampler.hold(name, value, msg.timestamp, name in decoder.last_saturated)
-            if progress is not None and count % 5000 == 0:
-                progress(source.position())
     finally:
         frames.close()
         source.stop()
+    for warning in source.warnings():
+        LOG.warning(warning)
     table = np.array(rows, dtype=float).reshape(-1, 6)
     keep = _long_stretches(table[:, 5].astype(bool))
     table = table[keep]

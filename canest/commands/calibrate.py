@@ -11,6 +11,7 @@ from canest.apps.calibrate import SHARED, calibrate
 from canest.apps.calibrated_config import bank_lines, check_new, write_calibrated
 from canest.apps.drive_signals import check_signals, read_drive
 from canest.commands.common import FORMATTER, add_config, add_log_reading, config_from_args, log_reading
+from canest.commands.replay import warnings_to_stderr
 from canest.config import DEFAULT_CONFIG
 from canest.io.outputs import check_outputs
 
@@ -78,6 +79,7 @@ def format_fit(config, fit, logs: list) -> list:
 
 
 def run(args) -> int:
+    warnings_to_stderr()  # a damaged log's warnings as replay gives them
     config = config_from_args(args)
     check_signals(config)
     if args.out:
