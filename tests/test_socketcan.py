@@ -126,7 +126,7 @@ def run_end_to_end(tmp_path, dlc_run, play_command):
     assert code == 0, stderr
     assert f"frames={len(sim.frames)}" in stderr and f"decoded={len(sim.frames)}" in stderr, stderr
     yaw_py, yaw_dump = yaw_frames(by_python_can), yaw_frames(by_candump)
-    assert len(yaw_py) == len(yaw_dump) > 700
+    assert len(yaw_py) == len(yaw_dump)  # how many: every tick not superseded (asserted below)
     assert [m.data for m in yaw_py] == [m.data for m in yaw_dump]
     check_integrity(yaw_py)
     rmse, live = live_accuracy(tmp_path / "live.csv", truth_csv, tmp_path / "received.log", sim.frames)
