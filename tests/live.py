@@ -83,6 +83,8 @@ class Player(threading.Thread):
         self.done = threading.Event()
         self.sent = 0
         self.failed = 0
+        self.dropped = []
+        self.progress = 0.0  # the drive's time (s, from the start) of the last frame sent
         self.start_time = None
         self.duration = frames[-1].timestamp - frames[0].timestamp + 0.01  # one pass, s of log time
 
@@ -109,6 +111,7 @@ class Player(threading.Thread):
                         time.sleep(elapsed - now)
                         now = elapsed
                 if self.drop and self.drop(frame, elapsed):
+                    self.dropped.append(time.time())  # wall time of each withheld frame (few: a clock read each)
                     continue
                 if self.mutate:
                     frame = self.mutate(frame, elapsed)
@@ -120,6 +123,7 @@ class Player(threading.Thread):
                 try:
                     frames_of(bus).send(frame)  # the daemon's own frame path: no clock read per frame
                     self.sent += 1
+                    self.progress = elapsed
                 except (OSError, can.CanError):
                     self.failed += 1
                     bus.shutdown()
