@@ -96,6 +96,7 @@ class Player(threading.Thread):
 
     def run(self):
         bus = self._bus()
+        link = bus and frames_of(bus)  # the daemon's own frame path: no clock read per frame
         self.start_time = time.perf_counter()
         t_first = self.frames[0].timestamp
         duration = self.duration
@@ -117,11 +118,12 @@ class Player(threading.Thread):
                     frame = self.mutate(frame, elapsed)
                 if bus is None:
                     bus = self._bus()
+                    link = bus and frames_of(bus)
                     if bus is None:
                         self.failed += 1
                         continue
                 try:
-                    frames_of(bus).send(frame)  # the daemon's own frame path: no clock read per frame
+                    link.send(frame)
                     self.sent += 1
                     self.progress = elapsed
                 except (OSError, can.CanError):
