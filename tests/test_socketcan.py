@@ -126,16 +126,6 @@ class Capture:
         return frames, list(can.LogReader(str(self.candump_path)))
 
 
-def wait_until_read(daemon, frames: int, timeout: float = 60.0) -> None:
-    """A daemon in the loaded guest may be seconds behind the bus, its socket holding the rest: ask for its
-    status (SIGUSR1) until it has read ``frames`` (or ``timeout`` passed), so SIGTERM does not cut the backlog."""
-    deadline = time.monotonic() + timeout
-    while f"status: frames={frames} " not in daemon.stderr and time.monotonic() < deadline:
-        daemon.signal(signal.SIGUSR1)
-        time.sleep(0.5)
-    time.sleep(0.3)
-
-
 def run_end_to_end(tmp_path, dlc_run, play_command):
     log, truth_csv, sim = dlc_run
     with receive_queues(4 * 1024 * 1024):  # every frame is asserted below: room for the guest's stalls
@@ -143,7 +133,7 @@ def run_end_to_end(tmp_path, dlc_run, play_command):
         daemon = Daemon(tmp_path / "live.csv")
     try:
         subprocess.run(play_command(log), check=True, timeout=120, capture_output=True)
-        wait_until_read(daemon, len(sim.frames))
+        daemon.wait_until_read(len(sim.frames))
     finally:
         code = daemon.terminate()
     by_python_can, by_candump = capture.finish()

@@ -91,9 +91,12 @@ class Service:
         self.bus_sink = BusSink(self.outputs, self.pipeline.encoder, self.counts)
 
     def _close(self) -> None:
+        if self.inputs is not None:
+            self.earlier["input_kernel_dropped"] += self.inputs.kernel_dropped()
         for link in {id(self.inputs): self.inputs, id(self.outputs): self.outputs}.values():
             if link is not None:
                 link.close()
+        self.inputs = self.outputs = None
 
     def _publish(self, estimates) -> None:
         self.counts["ticks"] += len(estimates)
@@ -193,6 +196,7 @@ class Service:
         merged = Counter(self.earlier)
         merged.update({k: v for k, v in self.pipeline.summary().items() if isinstance(v, int)})
         merged.update(self.counts)
+        merged["input_kernel_dropped"] += self.inputs.kernel_dropped() if self.inputs is not None else 0
         return dict(merged)
 
 
