@@ -388,13 +388,16 @@ def test_clock_steps_forward_and_back_reanchor_the_ticks(session, tmp_path):
     subprocess.run(["date", "-s", "@%.3f" % (time.time() + 3600)], check=True, capture_output=True)
     time.sleep(1.5)
     subprocess.run(["date", "-s", "@%.3f" % (time.time() - 3600)], check=True, capture_output=True)
-    assert wait_for_status(capture, normal, since=time.time(), run=20), "estimating normally after both steps"
-    assert daemon.alive()
-    capture.stop()
-    assert daemon.terminate() == 0
+    time.sleep(1.5)
+    player.stop()
+    daemon.wait_until_read()
+    assert daemon.alive() and daemon.terminate() == 0
     assert summary_value(daemon.stderr, "time_jumps") >= 2
-    t = read_table(tmp_path / "live.csv")["t"]
-    assert np.abs(np.diff(t)).max() > 3000 and np.sum(np.abs(np.diff(t)) > 0.05) <= 4
+    table = read_table(tmp_path / "live.csv")
+    steps = np.abs(np.diff(table["t"]))
+    assert steps.max() > 3000 and np.sum(steps > 0.05) <= 4
+    after_both = table["mode"][np.flatnonzero(steps > 3000)[-1] + 1:]
+    assert np.sum(after_both == "normal") >= 50, "estimating normally after both steps"
 
 
 def test_live_benchmark_smoke_run_on_vcan():
