@@ -35,8 +35,8 @@ and road friction (with standard deviations and validity) as CAN frames of an
 output DBC.
 
 start here:
-  canest demo                      simulated vehicle on virtual CAN, live, with an accuracy table
-  canest check                     what the built-in config maps (use --config for yours)
+  canest demo                      # simulated vehicle on virtual CAN, live, with an accuracy table
+  canest check                     # what the built-in config maps (use --config for yours)
   canest simulate -o d.log --truth t.csv && canest replay d.log --csv e.csv && canest evaluate e.csv t.csv"""
 
 EPILOG = """exit status (as BSD sysexits.h):

@@ -14,6 +14,8 @@ import pytest
 
 from canest.apps.batch import plan
 from canest.apps.replay import replay
+from canest.errors import InputFileError
+from canest.io.logfiles import expand_logs
 from canest.io.sniff import sniff_format
 from canest.sim.simulate import simulate
 from tests.conftest import ROOT
@@ -179,3 +181,13 @@ def test_the_ford_log_is_read_under_its_own_name_as_under_a_log_suffix(tmp_path)
     as_recorded, as_log = run(config, log), run(config, renamed)
     assert as_recorded == as_log
     assert as_recorded["frames"] == 41250 == as_recorded["decoded"] + as_recorded["ignored_id"]
+
+
+def test_log_patterns_expand_sorted_each_log_once_and_a_pattern_matching_nothing_is_named(tmp_path):
+    for name in ("b.log", "a.log", "c.blf"):
+        (tmp_path / name).write_text("")
+    (tmp_path / "folder.log").mkdir()
+    found = expand_logs([tmp_path / "*.log", tmp_path / "a.log", "not-a-pattern.log"])
+    assert found == [str(tmp_path / "a.log"), str(tmp_path / "b.log"), "not-a-pattern.log"]
+    with pytest.raises(InputFileError, match=r"\*\.mf4: no log matches"):
+        expand_logs([tmp_path / "*.mf4"])

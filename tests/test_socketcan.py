@@ -3,6 +3,7 @@
 Run on a machine with vcan0/vcan1, or on any Linux host through the UML guest:
 ``tools/vcan-guest -- python -m pytest -m socketcan``.
 """
+import os
 import signal
 import subprocess
 import sys
@@ -171,6 +172,22 @@ def test_daemon_with_canest_player_python_can_and_candump_capture(tmp_path, dlc_
 
 def test_daemon_with_canplayer(tmp_path, dlc_run):
     run_end_to_end(tmp_path, dlc_run, lambda log: ["canplayer", "-I", str(log)])
+
+
+def test_candump_pipe_into_replay(dlc_run):
+    """``replay --help``'s pipe example as printed: candump's live text into ``canest replay -``, CSV rows out as
+    ticks complete, ``head`` ending the pipe (a pipe's reader going away ends canest quietly)."""
+    bin_dir = os.path.dirname(sys.executable)
+    pipe = subprocess.Popen("candump -L vcan0 | canest replay - --csv - | head", shell=True, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, env={**os.environ, "PATH": f"{bin_dir}:{os.environ['PATH']}"})
+    time.sleep(1.0)  # candump listening
+    subprocess.run(["canplayer", "-I", str(dlc_run[0])], check=True, timeout=120)
+    out, err = pipe.communicate(timeout=60)
+    rows = out.splitlines()
+    assert pipe.returncode == 0 and len(rows) == 10 and rows[0].startswith("t,"), (out, err)
+    times = np.array([float(row.split(",")[0]) for row in rows[1:]])
+    assert np.allclose(np.diff(times), 0.01), "one row per 10 ms tick, on the stream's own timestamps"
+    assert "Traceback" not in err
 
 
 def test_sigterm_on_an_idle_bus_exits_zero(tmp_path):

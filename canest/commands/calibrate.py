@@ -13,6 +13,7 @@ from canest.apps.drive_signals import check_signals, read_drive
 from canest.commands.common import FORMATTER, add_config, add_log_reading, config_from_args, log_reading
 from canest.commands.replay import warnings_to_stderr
 from canest.config import DEFAULT_CONFIG
+from canest.io.logfiles import expand_logs
 from canest.io.outputs import check_outputs
 
 EPILOG = """examples:
@@ -41,7 +42,8 @@ def register(subparsers) -> None:
     p = subparsers.add_parser("calibrate",
                               help="fit stiffnesses, steering, wheel radius and sensor biases to logged drives",
                               description=__doc__, epilog=EPILOG, formatter_class=FORMATTER)
-    p.add_argument("logs", nargs="+", metavar="LOG", help="logged drives (any format replay reads)")
+    p.add_argument("logs", nargs="+", metavar="LOG",
+                   help="logged drives (any format replay reads), or quoted glob patterns of them ('**' recurses)")
     add_config(p)
     add_log_reading(p)
     p.add_argument("--out", "-o", help="write the config with the calibrated values to this new file")
@@ -80,6 +82,7 @@ def format_fit(config, fit, logs: list) -> list:
 
 def run(args) -> int:
     warnings_to_stderr()  # a damaged log's warnings as replay gives them
+    args.logs = expand_logs(args.logs)
     config = config_from_args(args)
     check_signals(config)
     if args.out:

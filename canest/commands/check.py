@@ -11,7 +11,7 @@ from canest.estimation.catalog import losses
 from canest.signals import si_unit
 
 EPILOG = """examples:
-  canest check                                   the built-in config
+  canest check                                   # the built-in config
   canest check --config configs/ford_fusion_2017.yaml
   canest check --config my_car.yaml --json | jq .range_warnings
 

@@ -12,7 +12,7 @@ from canest.errors import DependencyError
 EPILOG = """examples:
   canest simulate --maneuver dlc --speed 80 --mu 0.85 -o dlc.log --truth dlc.csv
   canest compare dlc.log dlc.csv --filters all --plot dlc.png
-  canest compare sine.log sine.csv --filters ckf,fckf,svd-fckf
+  canest compare sine.blf sine.csv --filters ckf,fckf,svd-fckf
 
 Each filter gets the config's noise settings and its own default factorization
 and options. RMSE and MAE over valid ticks after --skip seconds; CPU us/step

@@ -18,7 +18,7 @@ from canest.sim.simulate import simulate
 EPILOG = """examples:
   canest simulate --maneuver dlc --speed 80 --mu 0.85 --out drive.log --truth truth.csv
   canest simulate --maneuver sine --speed 80 --mu 0.35 --out sine.blf --truth sine.csv --outliers 0.02
-  canest simulate --maneuver step --mu 0.85,0.85,0.3,0.3 --out split.log --truth split.csv
+  canest simulate --maneuver step --mu 0.85,0.3,0.85,0.3 --out split.log --truth split.csv   # split mu: right side on ice
   canest simulate --maneuver sine --speed 60 --mu 0.85 --mu-jump 6:0.35 --out jump.log --truth jump.csv
   canest simulate --out - --truth truth.csv | canest replay - --csv est.csv    # candump text through a pipe
   canest simulate -m country --seed 3 --stiffness-scale 0.7,1.3 --steering-offset 1.5 --steering-ratio-scale 1.08 \

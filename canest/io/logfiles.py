@@ -20,6 +20,7 @@ error) a :class:`~canest.errors.FileIOError` (74).
 """
 from __future__ import annotations
 
+import glob
 import gzip
 import logging
 import sys
@@ -226,3 +227,19 @@ def until_unreadable(reader, damage: LogDamage):
 
 def open_log(path, kind: str | None = None, channel: str | None = None) -> LogSource:
     return LogSource(path, kind, channel)
+
+
+def expand_logs(names) -> list:
+    """The logs named: each name as given, or, for a glob pattern (``*``, ``?``, ``[...]``; ``**`` recurses,
+    quoted so the program sees it, as on Windows shells), the files it matches, sorted; each log once.
+    A pattern that matches no file is an :class:`~canest.errors.InputFileError` naming it."""
+    logs = {}
+    for name in map(str, names):
+        if not glob.has_magic(name):
+            logs.setdefault(name)
+            continue
+        matches = sorted(path for path in glob.glob(name, recursive=True) if Path(path).is_file())
+        if not matches:
+            raise InputFileError(f"{name}: no log matches this pattern; check the folder and the quotes")
+        logs.update(dict.fromkeys(matches))
+    return list(logs)
