@@ -23,10 +23,12 @@ setup: $(VENV)/.test-extras system-deps
 system-deps:
 	tools/install-system-deps
 
-$(BIN)/canest: pyproject.toml
+# the demo needs no extras and no editable install (setuptools prints a warning for one): a plain install,
+# redone when a source file changes; the test lane installs the checkout editable, with its extras, on top
+$(BIN)/canest: pyproject.toml $(wildcard canest/*.py canest/*/*.py canest/data/*)
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e .
+	$(BIN)/python -m pip install --quiet .
 	touch $@
 
 $(VENV)/.test-extras: $(BIN)/canest

@@ -68,6 +68,8 @@ def test_demo_runs_and_reports_accuracy(config):
     assert scores["vx"].rmse < 0.2
     assert scores["beta"].rmse < 1.0
     assert scores["yaw_rate"].samples > 100
+    # the published std reaches the table: its coverage and NEES are the filter's, not an empty column's
+    assert all(scores[state].cov3 > 0.5 and np.isfinite(scores[state].nees) for state in ("vx", "yaw_rate"))
 
 
 def test_idle_bus_keeps_ticking_and_reports_missing_inputs(config, dlc_run):

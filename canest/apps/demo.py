@@ -114,7 +114,8 @@ def run_demo(config: Config, maneuver="dlc", speed_kmh=80.0, mu=0.85, seed=0, pl
     t0_wall, t0_log = service.pipeline.clock.t0, sim.frames[0].timestamp
     table = {"t": np.array([e.t - t0_wall for e in estimates]) * playback_speed + t0_log}
     for name in ("vx", "vy", "beta", "yaw_rate"):
-        table[name] = np.array([e.values[name] for e in estimates])
+        for column in (name, f"{name}_std"):  # the std too: the table's coverage and NEES columns need it
+            table[column] = np.array([e.values[column] for e in estimates])
     table["valid"] = np.array([e.valid_flags for e in estimates])
     scores = score(table, sim.truth, skip=0.5)
     print(f"\n{format_summary(summary)}", file=out)

@@ -101,7 +101,7 @@ def counts(estimate: dict, truth: dict, state: str, only_valid: bool = True, ski
     std_column = estimate.get(f"{state}_std")
     std = std_column[use] * factor if std_column is not None else np.full(error.size, np.nan)
     with np.errstate(divide="ignore", invalid="ignore"):
-        nees = np.where(std > 0, (error / std) ** 2, np.inf)
+        nees = np.where(std > 0, (error / std) ** 2, np.where(np.isnan(std), np.nan, np.inf))  # no std: no NEES
     sums = {"ticks": int(inside.sum()), "valid": int((inside & valid_mask(estimate, state)).sum()),
             "n": int(error.size), "sq": float(np.sum(error**2)), "abs": float(np.sum(error)),
             "max": float(error.max()) if error.size else math.nan,
