@@ -14,6 +14,12 @@ from canest.io.bus import frames_of
 from tests.conftest import CONFIG
 
 
+def counters(line: str) -> dict:
+    """The ``key=value`` counters of a frame summary or status line, as integers."""
+    return {key: int(value) for key, value in (part.split("=", 1) for part in line.split() if "=" in part)
+            if value.isdigit()}
+
+
 class Daemon:
     """``canest run`` as a subprocess (vcan0 -> vcan1 unless the config says otherwise)."""
 
@@ -61,7 +67,7 @@ class Daemon:
         self.signal(signal.SIGUSR1)
         assert self.wait_for("status: frames=", timeout=timeout, count=before + 1), "no status line on SIGUSR1"
         last = [line for line in self.stderr.splitlines() if "status: frames=" in line][-1]
-        return int(last.split("status: frames=")[1].split()[0])
+        return counters(last)["frames"]
 
     def wait_until_read(self, frames=None, timeout=60.0) -> int:
         """Wait until the daemon has read ``frames`` (or, if None, until its count stops growing once the bus is

@@ -3,9 +3,10 @@
 The offline examples run here (``simulate``'s first, the others in the order they are printed) in one folder
 set up as they assume: the repository's ``configs/``, the files the earlier examples wrote, and a few
 stand-ins under the names the examples use (``my_car.yaml`` is the built-in config, ``drive1.log``... and
-``drive.blf`` short simulated drives, ``live.csv`` an estimate CSV on epoch time, ``logs/`` a small fleet). An example that needs a CAN bus, a Dask scheduler
-or a second process is run by the test ``ELSEWHERE`` names (checked to exist); the README's two first-screen
-commands are CI's own (``make test``) and ``test_service_virtual`` (``canest demo``).
+``drive.blf`` short simulated drives, ``live.csv`` an estimate CSV on epoch time, ``logs/`` a small fleet).
+An example that needs a CAN bus, a Dask scheduler or a second process is run by the test ``ELSEWHERE`` names
+(checked to exist); the README's two first-screen commands are CI's own (``make test``) and
+``test_service_virtual``'s (``canest demo``).
 """
 import json
 import os
@@ -22,7 +23,8 @@ from tests.test_init import FORD_DBC
 
 ELSEWHERE = {
     "canest demo": "tests/test_service_virtual.py::test_demo_runs_and_reports_accuracy",
-    "canest replay drive.log --realtime -c vcan0": "tests/test_socketcan.py::test_daemon_with_canest_player_python_can_and_candump_capture",
+    "canest replay drive.log --realtime -c vcan0":
+        "tests/test_socketcan.py::test_daemon_with_canest_player_python_can_and_candump_capture",
     "canest replay drive.log --realtime -i udp_multicast -c 239.74.163.2 --rate 2":
         "tests/test_toolchain.py::test_daemon_monitor_and_player_as_three_processes_on_udp_multicast",
     "canest replay drive.log --realtime -i udp_multicast -c 239.74.163.2":
@@ -57,9 +59,16 @@ def printed_examples():
                 yield command, re.split(r"\s+#", words)[0].strip()
 
 
+def shell(command: str, where, **kwargs) -> subprocess.CompletedProcess:
+    """``command`` run by bash in ``where``, with this environment's ``canest`` first on the PATH."""
+    return subprocess.run(command, shell=True, cwd=where, capture_output=True, text=True, env=environment(),
+                          executable="/bin/bash", **kwargs)
+
+
 def folder_as_the_examples_assume(where):
-    run = lambda command: subprocess.run(command, shell=True, cwd=where, check=True, capture_output=True,  # noqa: E731
-                                         env=environment())
+    def run(command):
+        shell(command, where, check=True)
+
     os.symlink(ROOT / "configs", where / "configs")
     shutil.copy(ROOT / "configs" / "dici_ev.yaml", where / "my_car.yaml")
     (where / "my_car.yaml").write_text((where / "my_car.yaml").read_text().replace("../dbc/", f"{ROOT}/dbc/"))
@@ -101,15 +110,12 @@ def test_the_offline_examples_run_as_printed(tmp_path):
             continue
         if example.startswith("canest evaluate live.csv"):
             live_csv_from(tmp_path / "est.csv", tmp_path / "live.csv")
-        result = subprocess.run(example, shell=True, cwd=tmp_path, capture_output=True, text=True, timeout=600,
-                                env=environment(), executable="/bin/bash")
+        result = shell(example, tmp_path, timeout=600)
         if result.returncode != 0:
             failed.append(f"{example}\n    exit {result.returncode}: {result.stderr.strip()[-400:]}")
     assert not failed, "\n".join(failed)
     assert (tmp_path / "est.png").stat().st_size > 0 and (tmp_path / "results").is_dir()
-    scores = [json.loads(subprocess.run(f"canest evaluate {estimates} truth.csv --json {align}", shell=True,
-                                        cwd=tmp_path, capture_output=True, text=True, env=environment(),
-                                        check=True).stdout)
+    scores = [json.loads(shell(f"canest evaluate {estimates} truth.csv --json {align}", tmp_path, check=True).stdout)
               for estimates, align in (("live.csv", "--align first"), ("est.csv", ""))]
     assert scores[0]["vx"]["samples"] > 100 and scores[0].keys() == scores[1].keys()
     for state, aligned in scores[0].items():  # equal but for the epoch's rounding (6 decimals of 1.8e9 s)

@@ -23,13 +23,13 @@ import numpy as np
 import pytest
 
 from canest.codec import integrity
+from canest.codec.decode import InputDecoder
 from canest.apps.evaluate import read_table
 from canest.apps.replay import replay
 from canest.io.bus import frames_of
-from canest.pipeline import Pipeline
 from canest.signals import INPUT_GROUPS
 from tests.conftest import ROOT
-from tests.live import Capture, Daemon, Player, ip, receive_queues, restore_vcan
+from tests.live import Capture, Daemon, Player, counters, ip, receive_queues, restore_vcan
 
 pytestmark = pytest.mark.socketcan
 DB = cantools.database.load_file(str(ROOT / "dbc" / "canest_estimates.dbc"))
@@ -74,8 +74,7 @@ def wait_for_status(capture, accept, since=0.0, timeout=30.0, run=1):
 
 def summary_value(stderr, key):
     last = [line for line in stderr.splitlines() if line.startswith("frames=")][-1]
-    fields = dict(part.split("=") for part in last.split())
-    return int(fields.get(key, 0))
+    return counters(last).get(key, 0)
 
 
 @pytest.fixture
@@ -216,7 +215,7 @@ def test_frames_the_kernel_drops_on_a_full_receive_queue_are_counted(tmp_path, c
     bus that its kernel filter passes is accounted for: read, or dropped by the kernel."""
     with receive_queues(4096):  # a few frames
         daemon = Daemon(tmp_path / "live.csv")
-    wanted = set(Pipeline(config).decoder.frame_ids)
+    wanted = set(InputDecoder(config).frame_ids)
     frames = dlc_run[2].frames[:500]
     sender = can.Bus(interface="socketcan", channel="vcan0", fd=True)
     try:
