@@ -11,7 +11,7 @@ ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = ROOT / "canest"
 
 LAYERS = [  # bottom first
-    ("canest", "canest.errors", "canest.params", "canest.signals"),
+    ("canest", "canest.errors", "canest.params", "canest.calibration", "canest.signals"),
     ("canest.models", "canest.filters"),
     ("canest.settings",),
     ("canest.estimation", "canest.codec", "canest.resample", "canest.io"),

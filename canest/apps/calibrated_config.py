@@ -21,7 +21,7 @@ from pathlib import Path
 
 import yaml
 
-from canest.apps.calibrate import Fit
+from canest.calibration import Fit
 from canest.apps.init import write_new
 from canest.codec.dbc import load_database
 from canest.config import BUILTIN_PREFIX, load_config

@@ -7,7 +7,8 @@ from pathlib import Path
 
 from tqdm import tqdm
 
-from canest.apps.calibrate import SHARED, calibrate
+from canest.apps.calibrate import calibrate
+from canest.calibration import SHARED
 from canest.apps.calibrated_config import bank_lines, check_new, write_calibrated
 from canest.apps.drive_signals import check_signals, read_drive
 from canest.commands.common import FORMATTER, add_config, add_log_reading, config_from_args, log_reading

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from canest.apps.calibrate import SHARED, Fit
+from canest.calibration import SHARED, Fit
 from canest.models.wheels import GRAVITY, WheelGeometry
 from canest.params import VehicleParams
 from canest.sim.sensors import DEFAULT_SENSORS, SensorError

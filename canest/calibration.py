@@ -1,0 +1,49 @@
+"""The parameters canest calibrates: their names, starting values, scales and physical bounds, and a fit's result.
+
+Shared by the offline fit (:mod:`canest.apps.calibrate`), the config writer and
+the simulator's mismatched car (:mod:`canest.sim.mismatch`), so it sits below
+all of them. What each parameter means: :mod:`canest.apps.calibrate`.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class Parameter:
+    name: str
+    start: float
+    scale: float  # typical size of a change (least_squares x_scale, difference steps)
+    low: float
+    high: float
+
+
+SHARED = (
+    Parameter("front", 1.0, 0.1, 0.2, 5.0),
+    Parameter("rear", 1.0, 0.1, 0.2, 5.0),
+    Parameter("ratio", 1.0, 0.02, 0.5, 2.0),
+    Parameter("steering_offset", 0.0, math.radians(0.5), -math.radians(30.0), math.radians(30.0)),
+    Parameter("gyro_bias", 0.0, math.radians(0.1), -math.radians(5.0), math.radians(5.0)),
+    Parameter("ay_bias", 0.0, 0.05, -2.0, 2.0),
+    Parameter("speed", 1.0, 0.01, 0.8, 1.25),
+)
+BANK = Parameter("bank", 0.0, math.radians(0.5), -math.radians(15.0), math.radians(15.0))
+
+
+@dataclass
+class Fit:
+    names: list  # parameter names, the banks as bank[i]
+    values: np.ndarray
+    half_widths: np.ndarray  # 95 % confidence half-widths
+    correlation: np.ndarray
+    rms: dict  # channel -> residual RMS at the solution (yaw_rate rad/s, ay m/s^2)
+    seconds: float  # driving fitted
+
+    def value(self, name: str) -> float:
+        return float(self.values[self.names.index(name)])
+
+    def half_width(self, name: str) -> float:
+        return float(self.half_widths[self.names.index(name)])
