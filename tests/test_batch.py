@@ -19,8 +19,9 @@ import can
 import numpy as np
 import pytest
 
-from canest.apps.batch import (ESTIMATES, FLEET_SUMMARY, SUMMARY, Task, complete, find_logs, fingerprint, input_root,
-                               plan, run_batch)
+from canest.apps.batch import run_batch
+from canest.apps.batch_plan import (ESTIMATES, FLEET_SUMMARY, SUMMARY, Task, complete, find_logs, fingerprint,
+                                    input_root, plan)
 from canest.apps.evaluate import read_table, score
 from canest.apps.replay import replay
 from canest.errors import CanestError

@@ -4,7 +4,7 @@ from pathlib import Path
 
 import pytest
 
-from canest.apps.batch import file_fingerprint, find_logs, input_root, plan, truth_for
+from canest.apps.batch_plan import file_fingerprint, find_logs, input_root, plan, truth_for
 from canest.errors import UsageError
 
 

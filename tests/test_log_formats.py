@@ -12,7 +12,7 @@ import sys
 import can
 import pytest
 
-from canest.apps.batch import plan
+from canest.apps.batch_plan import plan
 from canest.apps.replay import replay
 from canest.errors import InputFileError
 from canest.io.logfiles import expand_logs

@@ -6,7 +6,9 @@ import time
 from contextlib import contextmanager
 from pathlib import Path
 
-from canest.apps.batch import CONNECT_TIMEOUT_S, FLEET_SUMMARY, Stop, fleet_table, plot_errors, run_batch
+from canest.apps.batch import CONNECT_TIMEOUT_S, Stop, run_batch
+from canest.apps.batch_plan import FLEET_SUMMARY
+from canest.apps.fleet_report import fleet_table, plot_errors
 from canest.commands.common import FORMATTER, add_config, add_log_reading, config_from_args, log_reading
 from canest.apps.compare import parse_filters
 from canest.errors import DependencyError
