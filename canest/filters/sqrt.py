@@ -15,7 +15,6 @@ symmetric positive semidefinite by construction, whatever rounding does.
 from __future__ import annotations
 
 import numpy as np
-import scipy.linalg
 
 from canest.filters import rules
 from canest.filters.base import GaussianFilter, Measurement, Transition, svd_root
@@ -23,8 +22,8 @@ from canest.filters.sigma import FACTORIZATIONS
 
 
 def tria(A: np.ndarray) -> np.ndarray:
-    """Lower-triangular T with T T^T = A A^T (QR of A^T)."""
-    R = scipy.linalg.qr(A.T, mode="r", check_finite=False)[0]
+    """Lower-triangular T with T T^T = A A^T (QR of A^T; the signs make T's diagonal non-negative)."""
+    R = np.linalg.qr(A.T, mode="r")
     T = R[: A.shape[0]].T
     return T * np.where(np.diag(T) < 0, -1.0, 1.0)
 
