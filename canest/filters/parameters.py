@@ -29,7 +29,8 @@ the state as random-walk parameters:
 from __future__ import annotations
 
 import numpy as np
-from scipy.special import erfcx
+
+from canest.filters.special import erfcx
 
 SQRT_2_OVER_PI = np.sqrt(2.0 / np.pi)
 
