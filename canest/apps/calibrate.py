@@ -6,7 +6,8 @@ axles' lateral forces, which follow their slip angles over the config's tire
 :data:`canest.apps.drive_signals.STEP`) is driven by the measured steering
 wheel angle and wheel speed of every log and predicts the measured yaw rate
 and lateral acceleration; :func:`scipy.optimize.least_squares` moves the
-parameters until the predictions fit, over all logs at once; a third channel
+parameters until the predictions fit, over all logs at once (scipy: the
+``calibrate`` extra); a third channel
 is the kinematic identity ``ay - ay_bias = v r + dvy/dt - g sin(bank)`` with the
 measured yaw rate (only dvy/dt is the model's), which holds beyond the tires'
 linear range too:
@@ -51,10 +52,10 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.optimize import least_squares
 
 from canest.apps.drive_signals import STEP, Drive
 from canest.calibration import BANK, SHARED, Fit
+from canest.errors import DependencyError
 from canest.models.wheels import GRAVITY
 from canest.params import VehicleParams
 
@@ -167,6 +168,7 @@ def _widening(errors: np.ndarray) -> float:
 
 def calibrate(vehicle: VehicleParams, drives: list, progress=None) -> Fit:
     """Fit the parameters (module docstring) to ``drives``; ``progress(evaluations)`` after each evaluation."""
+    optimize = DependencyError.require("scipy.optimize", "canest calibrate", "pip install 'canest[calibrate]'")
     model = SingleTrackFit(vehicle, drives)
     x0 = np.array([p.start for p in model.parameters])
     bounds = (np.array([p.low for p in model.parameters]), np.array([p.high for p in model.parameters]))
@@ -181,8 +183,8 @@ def calibrate(vehicle: VehicleParams, drives: list, progress=None) -> Fit:
 
     solution = x0
     for _ in range(2):  # the second pass weights each channel by its own residual RMS of the first
-        result = least_squares(fun, solution, jac=lambda x: model.jacobian(x), bounds=bounds, x_scale=model.scales,
-                               method="trf", xtol=1e-10, ftol=1e-10, max_nfev=200)
+        result = optimize.least_squares(fun, solution, jac=lambda x: model.jacobian(x), bounds=bounds,
+                                        x_scale=model.scales, method="trf", xtol=1e-10, ftol=1e-10, max_nfev=200)
         solution = result.x
         errors = {name: e[:, 0] for name, e in model.channel_errors(solution[:, None]).items()}
         rms = {name: float(np.sqrt(np.mean(e**2))) for name, e in errors.items()}

@@ -32,17 +32,20 @@ A grid finds the global minimum (a local search may not). ``d_i >= (1 - w) + w /
 by the convexity of ``1/x``: the fused covariance is positive definite by
 construction for every w. More than two sources: the weights are found over
 the simplex by SLSQP on the direct formulas, rejecting weights whose fused
-information is not positive definite.
+information is not positive definite (scipy's, from the ``calibrate`` extra:
+the filters' two-source fusion does not need it).
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.optimize
+
+from canest.errors import DependencyError
 
 GRID = np.linspace(0.0, 1.0, 101)
 METHODS = ("ici", "ci")
+INSTALL_SCIPY = "pip install 'canest[calibrate]'"
 
 
 @dataclass
@@ -123,8 +126,9 @@ def fuse_many(method: str, xs: list, Ps: list, weights=None) -> Fused:
         return float(np.sum(1.0 / values)) if values.min() > 0 else np.inf
 
     if weights is None:
+        optimize = DependencyError.require("scipy.optimize", f"fusing {n} estimates", INSTALL_SCIPY)
         start = np.full(n, 1.0 / n)
-        result = scipy.optimize.minimize(
+        result = optimize.minimize(
             lambda w: min(trace(w), 1e300), start, method="SLSQP", bounds=[(0.0, 1.0)] * n,
             constraints=[{"type": "eq", "fun": lambda w: w.sum() - 1.0}])
         weights = result.x if np.isfinite(trace(result.x)) and trace(result.x) <= trace(start) else start
