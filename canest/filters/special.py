@@ -12,7 +12,7 @@ It keeps scipy out of the filters (scipy is an optional extra). Two regimes:
   ``erfcx(x) = 1 / sqrt(pi) * 1 / (x + (1/2) / (x + (2/2) / (x + (3/2) / (x + ...))))``,
   evaluated from its ``TERMS``-th level back.
 
-Against 40-digit mpmath both regimes are within 5e-16 relative over [-26.6, 1e300].
+Against 50-digit mpmath both regimes are within 5e-16 relative over [-26.6, 1e150] (measured).
 """
 from __future__ import annotations
 
