@@ -10,7 +10,7 @@ from canest import __version__
 from canest.errors import CanestError, FileIOError
 
 LOG_LEVELS = ("DEBUG", "INFO", "WARNING", "ERROR")
-# command -> what `canest --help` lists; a command's module (and numpy, scipy, python-can behind it) is imported
+# command -> what `canest --help` lists; a command's module (and numpy, python-can, cantools behind it) is imported
 # only when that command runs or shows its own help, so `canest --version` and `canest --help` start fast
 COMMANDS = {
     "demo": "live demonstration on virtual CAN with a simulated vehicle",
