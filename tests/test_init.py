@@ -10,9 +10,8 @@ import yaml
 from canest.config import DEFAULT_CONFIG, load_config
 from canest.config.discover import wheel_of, words_of
 from canest.estimation.catalog import BASE_INPUTS, CATALOG, losses
-from tests.conftest import ROOT
+from tests.conftest import ROOT, ford_dbc
 
-FORD_DBC = ROOT.parent / "shared" / "realdata" / "ford_fusion_2017" / "ford_lincoln_base_pt.dbc"
 CANEST = [sys.executable, "-m", "canest"]
 
 # a small DBC of a car without accelerometers: wheel speeds (km/h), steering (deg), a yaw rate without a unit
@@ -52,7 +51,7 @@ def one_line_error(result, status, *parts):
 
 def test_init_from_the_ford_dbc_finds_its_inputs_and_check_accepts_the_config(tmp_path):
     out = tmp_path / "fusion.yaml"
-    result = canest("init", "--dbc", FORD_DBC, "--out", out)
+    result = canest("init", "--dbc", ford_dbc(), "--out", out)
     assert result.returncode == 0, result.stderr
     assert f"wrote {out}" in result.stderr
     signals = yaml.safe_load(out.read_text())["input"]["signals"]
@@ -75,11 +74,11 @@ def test_init_from_the_ford_dbc_finds_its_inputs_and_check_accepts_the_config(tm
 def test_init_never_replaces_a_file(tmp_path):
     out = tmp_path / "mine.yaml"
     out.write_text("# my own config\n")
-    one_line_error(canest("init", "--dbc", FORD_DBC, "--out", out), 73, str(out), "never replaces")
+    one_line_error(canest("init", "--dbc", ford_dbc(), "--out", out), 73, str(out), "never replaces")
     assert out.read_text() == "# my own config\n"
     link = tmp_path / "dangling.yaml"
     link.symlink_to(tmp_path / "nowhere.yaml")
-    one_line_error(canest("init", "--dbc", FORD_DBC, "--out", link), 73, "never replaces")
+    one_line_error(canest("init", "--dbc", ford_dbc(), "--out", link), 73, "never replaces")
     assert not (tmp_path / "nowhere.yaml").exists()
     assert sorted(p.name for p in tmp_path.iterdir()) == ["dangling.yaml", "mine.yaml"]  # no temporary left
 
