@@ -33,6 +33,12 @@ WITH_ACCELEROMETER = NO_ACCELEROMETER + """BO_ 36 KINEMATICS: 8 SAS
  SG_ ACCEL_Y : 23|16@0- (0.001,0) [-32|32] "m/s2" XXX
  SG_ ACCEL_X_REQ : 39|16@0- (0.001,0) [-32|32] "m/s^2" XXX
 """
+# Toyota-style KINEMATICS: 10 bits from a negative offset, the DBC range in raw counts [0|65535]
+RAW_RANGES = NO_ACCELEROMETER + """BO_ 36 KINEMATICS: 8 SAS
+ SG_ YAW_RATE : 1|10@0+ (0.244,-125) [0|65535] "deg/s" XXX
+ SG_ ACCEL_X : 17|10@0+ (0.03589,-18.375) [0|65535] "m/s^2" XXX
+ SG_ ACCEL_Y : 33|10@0+ (0.03589,-18.375) [0|65535] "m/s^2" XXX
+"""
 
 
 def canest(*args, cwd=ROOT):
@@ -106,6 +112,42 @@ def test_a_signal_without_a_unit_gets_an_assumed_one_marked_for_the_user_and_che
     config = load_config(tmp_path / "car.yaml")
     assert config.vehicle.mass == load_config(DEFAULT_CONFIG).vehicle.mass  # canest's default, said so
     assert canest("check", "--config", tmp_path / "car.yaml").returncode == 0
+
+
+def test_raw_style_ranges_get_range_none_and_check_names_each_one_the_config_does_not_override(tmp_path):
+    dbc = tmp_path / "car.dbc"
+    dbc.write_text(RAW_RANGES)
+    result = canest("init", dbc, "--out", tmp_path / "car.yaml")  # the DBC as a positional argument
+    assert result.returncode == 0, result.stderr
+    signals = yaml.safe_load((tmp_path / "car.yaml").read_text())["input"]["signals"]
+    for canonical in ("yaw_rate", "ax", "ay"):
+        assert signals[canonical]["range"] == "none" and signals[canonical]["signal"].startswith("KINEMATICS."), signals
+    assert signals["wheel_speed_fl"] == "WHEELS.WHEEL_SPEED_FL"  # a physical range [0|655.35] is kept
+    config = load_config(tmp_path / "car.yaml")
+    assert config.signals["yaw_rate"].range == (None, None)
+    check = canest("check", "--config", tmp_path / "car.yaml")
+    assert check.returncode == 0 and "raw counts" not in check.stdout, check.stdout
+    document = yaml.safe_load((tmp_path / "car.yaml").read_text())
+    document["input"]["signals"]["yaw_rate"], document["input"]["signals"]["ay"] = "KINEMATICS.YAW_RATE", \
+        "KINEMATICS.ACCEL_Y"
+    document["input"]["signals"]["ax"] = {"signal": "KINEMATICS.ACCEL_X", "range": [-18.375, 18.34]}
+    (tmp_path / "dbc_ranges.yaml").write_text(yaml.safe_dump(document))
+    check = canest("check", "--config", tmp_path / "dbc_ranges.yaml")
+    assert check.returncode == 0, check.stderr
+    ay, yaw_rate = sorted(line for line in check.stdout.split("DBC ranges in raw counts")[1].splitlines()
+                          if line.startswith("  input "))  # ax has its own range: not warned
+    assert "input yaw_rate: KINEMATICS.YAW_RATE declares the raw-style range [0|65535]" in yaw_rate \
+        and "bits carry -125 to 124.612 deg/s" in yaw_rate and "input.signals.yaw_rate.range: none" in yaw_rate
+    assert "input ay: KINEMATICS.ACCEL_Y declares the raw-style range [0|65535]" in ay
+
+
+def test_the_dbc_is_positional_or_an_option_not_two_different_ones(tmp_path):
+    dbc = tmp_path / "car.dbc"
+    dbc.write_text(WITH_ACCELEROMETER)
+    positional, option = canest("init", dbc), canest("init", "--dbc", dbc)
+    assert positional.returncode == option.returncode == 0 and positional.stdout == option.stdout
+    assert canest("init", dbc, "--dbc", dbc).stdout == option.stdout
+    one_line_error(canest("init", dbc, "--dbc", tmp_path / "other.dbc"), 2, "two DBCs given", "other.dbc")
 
 
 def test_init_to_standard_output(tmp_path):
