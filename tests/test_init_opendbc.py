@@ -3,6 +3,7 @@
 Needs the optional package opendbc (`pip install 'canest[opendbc]'`, in the `test` extra); without it the
 module is skipped, and only then.
 """
+import math
 import subprocess
 import sys
 from collections import Counter
@@ -155,3 +156,20 @@ def test_a_file_of_opendbc_s_own_is_written_by_its_name_and_no_scratch_path_is_s
     assert signals["yaw_rate"] == {"signal": "KINEMATICS.YAW_RATE", "range": "none"}
     static = Path(opendbc.DBC_PATH) / "ford_lincoln_base_pt.dbc"
     assert yaml.safe_load(canest("init", static).stdout)["input"]["dbc"] == "opendbc:ford_lincoln_base_pt"
+
+
+def test_the_config_init_writes_for_a_toyota_drives_it_without_an_edit(tmp_path):
+    """opendbc's RAV4 as it ships: init overrides the raw-count KINEMATICS ranges (range: none) and gives no cycle
+    time (the DBC has none: replay measures them); with the DBC's ranges the negative values are rejected."""
+    from tests.test_toyota_drive import drive
+
+    out = tmp_path / "rav4.yaml"
+    write_new(out, starting_config("opendbc:toyota_nodsu_pt_generated", car="TOYOTA_RAV4_TSS2", out=out)[0])
+    summary, errors, normal = drive(load_config(out), tmp_path, "init")
+    assert normal >= 0.99 and summary["decoded"] == summary["frames"]
+    assert errors["vx"] < 0.1 and errors["yaw_rate"] < math.radians(0.5)
+    document = yaml.safe_load(out.read_text())
+    document["input"]["signals"]["yaw_rate"] = document["input"]["signals"]["yaw_rate"]["signal"]
+    out.write_text(yaml.safe_dump(document))
+    summary, _, normal = drive(load_config(out), tmp_path, "dbc_range")
+    assert summary["rejected_out_of_range"] > 100 and normal < 0.9
