@@ -201,3 +201,24 @@ def test_check_lists_nothing_for_a_config_that_maps_every_input():
     result = canest("check")
     assert result.returncode == 0, result.stderr
     assert "inputs not mapped" not in result.stdout
+
+
+@pytest.mark.parametrize("length, signed, scale, offset, bounds, raw", [
+    (10, False, 0.244, -125, (0, 65535), True),  # Toyota KINEMATICS.YAW_RATE
+    (10, False, 0.244, -125, (0, 1023), True),  # its own bit field's raw counts
+    (8, True, 0.5, 100, (-128, 127), True),  # signed raw counts of a signal carrying 36 to 163.5
+    (16, True, 0.01, 0, (-32768, 32767), False),  # raw counts, but admitting all the bits carry (+-327.68)
+    (16, False, 0.01, -67.67, (0, 250), False),  # Toyota WHEEL_SPEEDS: a physical range cutting off reversing
+    (16, True, 1, 0, (-32768, 32767), False),  # raw and physical are one
+    (8, False, 0.5, 0, (0, 255), False),  # raw counts, but admits everything the bits carry
+    (12, True, 1.5, 0, (-500, 500), False),  # Toyota STEER_ANGLE: physical, inside what the bits carry
+])
+def test_a_raw_style_range_is_integer_limits_cutting_off_values_the_bits_carry(length, signed, scale, offset,
+                                                                                bounds, raw):
+    from types import SimpleNamespace
+
+    from canest.codec.raw_range import raw_style
+
+    signal = SimpleNamespace(length=length, is_signed=signed, scale=scale, offset=offset, minimum=bounds[0],
+                             maximum=bounds[1], is_float=False)
+    assert raw_style(signal) == raw

@@ -151,7 +151,8 @@ def test_a_file_of_opendbc_s_own_is_written_by_its_name_and_no_scratch_path_is_s
     text = (tmp_path / "rav4.yaml").read_text()
     assert yaml.safe_load(text)["input"]["dbc"] == "opendbc:toyota_nodsu_pt_generated"
     assert str(cached.parent) not in text and "canest-init-" not in text + result.stderr
-    assert "the config: input.dbc opendbc:toyota_nodsu_pt_generated: The signals PCS_TEMP and SET_ME_X10 are overlapping" in result.stderr
+    assert "the config: input.dbc opendbc:toyota_nodsu_pt_generated: The signals PCS_TEMP and SET_ME_X10 are " \
+           "overlapping" in result.stderr
     signals = yaml.safe_load(text)["input"]["signals"]
     assert signals["yaw_rate"] == {"signal": "KINEMATICS.YAW_RATE", "range": "none"}
     static = Path(opendbc.DBC_PATH) / "ford_lincoln_base_pt.dbc"
