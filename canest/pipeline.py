@@ -13,7 +13,8 @@ from collections import Counter
 
 import can
 
-from canest.codec.decode import InputDecoder
+from canest.codec.cycle_watch import CycleWatch
+from canest.codec.decode import InputDecoder, timeout
 from canest.codec.encode import EstimateEncoder
 from canest.estimation.catalog import make_estimator
 from canest.resample import Resampler, TickClock
@@ -25,6 +26,9 @@ class Pipeline:
         self.config = config
         self.decoder = InputDecoder(config)
         self.resampler = Resampler(config.signals, self.decoder.timeouts(config.estimator.timeout_cycles))
+        plans = self.decoder.plans
+        self.cycles = CycleWatch({fid: plan.cycle_time() for fid, plan in plans.items()},
+                                 {fid: plan.message.name for fid, plan in plans.items()})
         self.estimator = make_estimator(config)
         self.encoder = EstimateEncoder(config.output_dbc, output_channel)
         self.clock = TickClock(1.0 / config.estimator.rate_hz)
@@ -50,11 +54,20 @@ class Pipeline:
             self.counts["time_backwards"] += 1
         self.last_time = t if self.last_time is None else max(self.last_time, t)
         values = self.decoder.decode(msg)
+        if values is not None:
+            self._watch_cycle(msg.arbitration_id, t)
         estimates = self._ticks(t)
         if values:
             for name, value in values:
                 self.resampler.hold(name, value, t, name in self.decoder.last_saturated)
         return estimates
+
+    def _watch_cycle(self, frame_id: int, t: float) -> None:
+        """Measure the message's cycle; where only the default was assumed, its inputs' timeouts follow it."""
+        measured = self.cycles.observe(frame_id, t)
+        if measured is not None:
+            for spec in self.decoder.plans[frame_id].specs:
+                self.resampler.set_timeout(spec.canonical, timeout(measured, self.config.estimator.timeout_cycles))
 
     def advance(self, t: float) -> list:
         """Ticks strictly before ``t`` with no new frame (idle bus)."""

@@ -37,6 +37,10 @@ class Resampler:
         self.fresh = np.zeros(len(self.names), dtype=bool)
         self.saturated = np.zeros(len(self.names), dtype=bool)
 
+    def set_timeout(self, name: str, seconds: float) -> None:
+        """A new timeout for ``name`` (its message's cycle measured on the bus)."""
+        self.timeouts[self.index[name]] = seconds
+
     def hold(self, name: str, value: float, t: float, saturated: bool = False) -> None:
         i = self.index[name]
         self.values[i] = value

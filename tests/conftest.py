@@ -10,12 +10,49 @@ import socket
 from pathlib import Path
 
 import pytest
+import yaml
 
 from canest.config import load_config
 from canest.sim.simulate import simulate
 
 ROOT = Path(__file__).resolve().parent.parent
 CONFIG = ROOT / "configs" / "dici_ev.yaml"
+REALDATA_ENV = "CANEST_REALDATA"  # the folder of the shared real data, where it is not above the checkout
+
+
+def realdata(*parts) -> Path:
+    """A path inside the shared real data: ``$CANEST_REALDATA``, else the first ``shared/realdata`` in a folder
+    above this file (a checkout in /work/main and a worktree anywhere deeper both find it).
+
+    Absent data fails the test, naming every place looked in: a skipped real-data test would hide a gap."""
+    given = os.environ.get(REALDATA_ENV)
+    places = [Path(given)] if given else [folder / "shared" / "realdata" for folder in Path(__file__).resolve().parents]
+    for place in places:
+        if place.joinpath(*parts).exists():
+            return place.joinpath(*parts)
+    pytest.fail(f"real data {Path(*parts)} not found in {', '.join(map(str, places))}; set {REALDATA_ENV} to the "
+                "folder holding it (shared/realdata)", pytrace=False)
+
+
+FORD = "ford_fusion_2017"  # the Ford Fusion's recorded drive and opendbc's DBC, in the real data
+FORD_CONFIG = ROOT / "configs" / "ford_fusion_2017.yaml"
+
+
+def ford_dbc() -> Path:
+    """opendbc's ``ford_lincoln_base_pt.dbc`` as the Ford's real data holds it, unedited."""
+    return realdata(FORD, "ford_lincoln_base_pt.dbc")
+
+
+def ford_config(folder, edit=None) -> Path:
+    """The Ford config written into ``folder`` with its DBC found by :func:`realdata` (the config's own relative
+    path holds only in /work/main) and ``edit`` applied to its dict."""
+    data = yaml.safe_load(FORD_CONFIG.read_text())
+    data["input"]["dbc"] = str(ford_dbc())
+    if edit is not None:
+        edit(data)
+    path = Path(folder) / "ford.yaml"
+    path.write_text(yaml.safe_dump(data, sort_keys=False))
+    return path
 
 
 def vcan_missing():

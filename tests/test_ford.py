@@ -1,7 +1,7 @@
 """A real production car by config alone: a 2017 Ford Fusion's recorded drive through opendbc's DBC, unedited.
 
 The log (20.9 s, 41 250 classic CAN frames, adaptive cruise from about 30 to
-80 km/h) and the DBC are in ``../shared/realdata/ford_fusion_2017``. The
+80 km/h) and the DBC are in ``shared/realdata/ford_fusion_2017`` (found by ``tests.conftest.realdata``). The
 estimates are compared with the car's own speed (``BrakeSysFeatures.Veh_V_ActlBrk``)
 and yaw rate (``Yaw_Data_FD1.VehYaw_W_Actl``) decoded with cantools.
 """
@@ -15,16 +15,12 @@ import can
 import cantools
 import numpy as np
 import pytest
-import yaml
 
 from canest.apps.replay import replay
 from canest.config import load_config
-from tests.conftest import ROOT
+from tests.conftest import FORD, ROOT, ford_config, ford_dbc, realdata
 
-REALDATA = ROOT.parent / "shared" / "realdata" / "ford_fusion_2017"
-LOG = REALDATA / "acc_on_speed_changing_from_30km_to_80km_per_hour.candump"
-DBC = REALDATA / "ford_lincoln_base_pt.dbc"
-CONFIG = ROOT / "configs" / "ford_fusion_2017.yaml"
+LOG = "acc_on_speed_changing_from_30km_to_80km_per_hour.candump"
 MOVING = 1.0  # m/s of the car's own speed
 
 
@@ -32,7 +28,7 @@ MOVING = 1.0  # m/s of the car's own speed
 def drive(tmp_path_factory):
     """The log as a ``.log`` file (python-can picks its reader by suffix)."""
     path = tmp_path_factory.mktemp("ford") / "drive.log"
-    shutil.copy(LOG, path)
+    shutil.copy(realdata(FORD, LOG), path)
     return path
 
 
@@ -44,17 +40,12 @@ def run(config, log):
 
 def variant(tmp_path, edit):
     """The Ford config with ``edit`` applied to its dict, written beside the test (the DBC path made absolute)."""
-    data = yaml.safe_load(CONFIG.read_text())
-    data["input"]["dbc"] = str(DBC)
-    edit(data)
-    path = tmp_path / "ford.yaml"
-    path.write_text(yaml.safe_dump(data, sort_keys=False))
-    return load_config(path)
+    return load_config(ford_config(tmp_path, edit))
 
 
 def car_signal(log, frame_id, name, factor=1.0):
     """(times, values) of one of the car's own signals, decoded by cantools, physical values times ``factor``."""
-    message = cantools.database.load_file(str(DBC)).get_message_by_frame_id(frame_id)
+    message = cantools.database.load_file(str(ford_dbc())).get_message_by_frame_id(frame_id)
     rows = [(m.timestamp, message.decode(m.data, decode_choices=False)[name] * factor)
             for m in can.LogReader(str(log)) if m.arbitration_id == frame_id]
     return np.array(rows).T
@@ -67,8 +58,8 @@ def accounted(summary):
 
 
 @pytest.fixture(scope="module")
-def ford_run(drive):
-    return run(load_config(CONFIG), drive)
+def ford_run(drive, tmp_path_factory):
+    return run(load_config(ford_config(tmp_path_factory.mktemp("config"))), drive)
 
 
 def test_ford_log_runs_normal_and_matches_the_cars_own_speed_and_yaw_rate(ford_run, drive):
@@ -131,11 +122,22 @@ def test_absolute_steering_flagged_faulty_is_rejected_by_cause(tmp_path, drive):
     assert np.mean([e.valid.get("vx", False) for e in estimates]) >= 0.99
 
 
-def test_check_names_where_each_cycle_time_comes_from():
-    out = subprocess.run([sys.executable, "-m", "canest", "check", "--config", str(CONFIG)], capture_output=True,
-                         text=True, cwd=ROOT)
+def test_check_names_where_each_cycle_time_comes_from(tmp_path):
+    out = subprocess.run([sys.executable, "-m", "canest", "check", "--config", str(ford_config(tmp_path))],
+                         capture_output=True, text=True, cwd=ROOT)
     assert out.returncode == 0, out.stderr
     rows = {line.split()[0]: line for line in out.stdout.splitlines() if line.split()}
     assert "10ms (config)" in rows["yaw_rate"] and "10ms (config)" in rows["ax"]
     assert "10ms (DBC)" in rows["wheel_speed_fl"] and "zero learned" in rows["steering_wheel_angle"]
     assert "fd=classic" in out.stdout and out.stdout.rstrip().endswith("OK")
+
+
+def test_the_real_data_is_found_through_canest_realdata_and_its_absence_fails_naming_where_it_was_looked_for(
+        tmp_path, monkeypatch):
+    (tmp_path / FORD).mkdir()
+    monkeypatch.setenv("CANEST_REALDATA", str(tmp_path))
+    assert realdata(FORD) == tmp_path / FORD
+    with pytest.raises(pytest.fail.Exception, match=f"{FORD}/nothing.dbc not found in {tmp_path}; set CANEST_REALDATA"):
+        realdata(FORD, "nothing.dbc")
+    monkeypatch.delenv("CANEST_REALDATA")
+    assert realdata(FORD, LOG).stat().st_size > 1_000_000  # found above the checkout, wherever it lies

@@ -10,9 +10,8 @@ import yaml
 from canest.config import DEFAULT_CONFIG, load_config
 from canest.config.discover import wheel_of, words_of
 from canest.estimation.catalog import BASE_INPUTS, CATALOG, losses
-from tests.conftest import ROOT
+from tests.conftest import ROOT, ford_dbc
 
-FORD_DBC = ROOT.parent / "shared" / "realdata" / "ford_fusion_2017" / "ford_lincoln_base_pt.dbc"
 CANEST = [sys.executable, "-m", "canest"]
 
 # a small DBC of a car without accelerometers: wheel speeds (km/h), steering (deg), a yaw rate without a unit
@@ -34,6 +33,12 @@ WITH_ACCELEROMETER = NO_ACCELEROMETER + """BO_ 36 KINEMATICS: 8 SAS
  SG_ ACCEL_Y : 23|16@0- (0.001,0) [-32|32] "m/s2" XXX
  SG_ ACCEL_X_REQ : 39|16@0- (0.001,0) [-32|32] "m/s^2" XXX
 """
+# Toyota-style KINEMATICS: 10 bits from a negative offset, the DBC range in raw counts [0|65535]
+RAW_RANGES = NO_ACCELEROMETER + """BO_ 36 KINEMATICS: 8 SAS
+ SG_ YAW_RATE : 1|10@0+ (0.244,-125) [0|65535] "deg/s" XXX
+ SG_ ACCEL_X : 17|10@0+ (0.03589,-18.375) [0|65535] "m/s^2" XXX
+ SG_ ACCEL_Y : 33|10@0+ (0.03589,-18.375) [0|65535] "m/s^2" XXX
+"""
 
 
 def canest(*args, cwd=ROOT):
@@ -52,7 +57,7 @@ def one_line_error(result, status, *parts):
 
 def test_init_from_the_ford_dbc_finds_its_inputs_and_check_accepts_the_config(tmp_path):
     out = tmp_path / "fusion.yaml"
-    result = canest("init", "--dbc", FORD_DBC, "--out", out)
+    result = canest("init", "--dbc", ford_dbc(), "--out", out)
     assert result.returncode == 0, result.stderr
     assert f"wrote {out}" in result.stderr
     signals = yaml.safe_load(out.read_text())["input"]["signals"]
@@ -75,11 +80,11 @@ def test_init_from_the_ford_dbc_finds_its_inputs_and_check_accepts_the_config(tm
 def test_init_never_replaces_a_file(tmp_path):
     out = tmp_path / "mine.yaml"
     out.write_text("# my own config\n")
-    one_line_error(canest("init", "--dbc", FORD_DBC, "--out", out), 73, str(out), "never replaces")
+    one_line_error(canest("init", "--dbc", ford_dbc(), "--out", out), 73, str(out), "never replaces")
     assert out.read_text() == "# my own config\n"
     link = tmp_path / "dangling.yaml"
     link.symlink_to(tmp_path / "nowhere.yaml")
-    one_line_error(canest("init", "--dbc", FORD_DBC, "--out", link), 73, "never replaces")
+    one_line_error(canest("init", "--dbc", ford_dbc(), "--out", link), 73, "never replaces")
     assert not (tmp_path / "nowhere.yaml").exists()
     assert sorted(p.name for p in tmp_path.iterdir()) == ["dangling.yaml", "mine.yaml"]  # no temporary left
 
@@ -107,6 +112,42 @@ def test_a_signal_without_a_unit_gets_an_assumed_one_marked_for_the_user_and_che
     config = load_config(tmp_path / "car.yaml")
     assert config.vehicle.mass == load_config(DEFAULT_CONFIG).vehicle.mass  # canest's default, said so
     assert canest("check", "--config", tmp_path / "car.yaml").returncode == 0
+
+
+def test_raw_style_ranges_get_range_none_and_check_names_each_one_the_config_does_not_override(tmp_path):
+    dbc = tmp_path / "car.dbc"
+    dbc.write_text(RAW_RANGES)
+    result = canest("init", dbc, "--out", tmp_path / "car.yaml")  # the DBC as a positional argument
+    assert result.returncode == 0, result.stderr
+    signals = yaml.safe_load((tmp_path / "car.yaml").read_text())["input"]["signals"]
+    for canonical in ("yaw_rate", "ax", "ay"):
+        assert signals[canonical]["range"] == "none" and signals[canonical]["signal"].startswith("KINEMATICS."), signals
+    assert signals["wheel_speed_fl"] == "WHEELS.WHEEL_SPEED_FL"  # a physical range [0|655.35] is kept
+    config = load_config(tmp_path / "car.yaml")
+    assert config.signals["yaw_rate"].range == (None, None)
+    check = canest("check", "--config", tmp_path / "car.yaml")
+    assert check.returncode == 0 and "raw counts" not in check.stdout, check.stdout
+    document = yaml.safe_load((tmp_path / "car.yaml").read_text())
+    document["input"]["signals"]["yaw_rate"], document["input"]["signals"]["ay"] = "KINEMATICS.YAW_RATE", \
+        "KINEMATICS.ACCEL_Y"
+    document["input"]["signals"]["ax"] = {"signal": "KINEMATICS.ACCEL_X", "range": [-18.375, 18.34]}
+    (tmp_path / "dbc_ranges.yaml").write_text(yaml.safe_dump(document))
+    check = canest("check", "--config", tmp_path / "dbc_ranges.yaml")
+    assert check.returncode == 0, check.stderr
+    ay, yaw_rate = sorted(line for line in check.stdout.split("DBC ranges in raw counts")[1].splitlines()
+                          if line.startswith("  input "))  # ax has its own range: not warned
+    assert "input yaw_rate: KINEMATICS.YAW_RATE declares the raw-style range [0|65535]" in yaw_rate \
+        and "bits carry -125 to 124.612 deg/s" in yaw_rate and "input.signals.yaw_rate.range: none" in yaw_rate
+    assert "input ay: KINEMATICS.ACCEL_Y declares the raw-style range [0|65535]" in ay
+
+
+def test_the_dbc_is_positional_or_an_option_not_two_different_ones(tmp_path):
+    dbc = tmp_path / "car.dbc"
+    dbc.write_text(WITH_ACCELEROMETER)
+    positional, option = canest("init", dbc), canest("init", "--dbc", dbc)
+    assert positional.returncode == option.returncode == 0 and positional.stdout == option.stdout
+    assert canest("init", dbc, "--dbc", dbc).stdout == option.stdout
+    one_line_error(canest("init", dbc, "--dbc", tmp_path / "other.dbc"), 2, "two DBCs given", "other.dbc")
 
 
 def test_init_to_standard_output(tmp_path):
@@ -160,3 +201,24 @@ def test_check_lists_nothing_for_a_config_that_maps_every_input():
     result = canest("check")
     assert result.returncode == 0, result.stderr
     assert "inputs not mapped" not in result.stdout
+
+
+@pytest.mark.parametrize("length, signed, scale, offset, bounds, raw", [
+    (10, False, 0.244, -125, (0, 65535), True),  # Toyota KINEMATICS.YAW_RATE
+    (10, False, 0.244, -125, (0, 1023), True),  # its own bit field's raw counts
+    (8, True, 0.5, 100, (-128, 127), True),  # signed raw counts of a signal carrying 36 to 163.5
+    (16, True, 0.01, 0, (-32768, 32767), False),  # raw counts, but admitting all the bits carry (+-327.68)
+    (16, False, 0.01, -67.67, (0, 250), False),  # Toyota WHEEL_SPEEDS: a physical range cutting off reversing
+    (16, True, 1, 0, (-32768, 32767), False),  # raw and physical are one
+    (8, False, 0.5, 0, (0, 255), False),  # raw counts, but admits everything the bits carry
+    (12, True, 1.5, 0, (-500, 500), False),  # Toyota STEER_ANGLE: physical, inside what the bits carry
+])
+def test_a_raw_style_range_is_integer_limits_cutting_off_values_the_bits_carry(length, signed, scale, offset,
+                                                                                bounds, raw):
+    from types import SimpleNamespace
+
+    from canest.codec.raw_range import raw_style
+
+    signal = SimpleNamespace(length=length, is_signed=signed, scale=scale, offset=offset, minimum=bounds[0],
+                             maximum=bounds[1], is_float=False)
+    assert raw_style(signal) == raw

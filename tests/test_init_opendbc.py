@@ -3,6 +3,7 @@
 Needs the optional package opendbc (`pip install 'canest[opendbc]'`, in the `test` extra); without it the
 module is skipped, and only then.
 """
+import math
 import subprocess
 import sys
 from collections import Counter
@@ -15,6 +16,7 @@ opendbc = pytest.importorskip("opendbc", reason="opendbc is not installed: pip i
                                                 "(the test extra installs it)")
 
 from canest.apps.init import starting_config, write_new  # noqa: E402
+from canest.cli import main  # noqa: E402
 from canest.config import load_config  # noqa: E402
 from canest.config.opendbc_cars import dbc_names  # noqa: E402
 from canest.errors import CanestError, DbcError  # noqa: E402
@@ -39,7 +41,18 @@ def opendbc_file(folder, name):
     return path
 
 
-def test_every_opendbc_dbc_gives_a_config_check_accepts_or_one_error_naming_what_it_lacks(tmp_path):
+def full_check(config, capsys) -> str:
+    """``canest check --config config`` run in this process (94 interpreters would take minutes): its output."""
+    capsys.readouterr()
+    with pytest.raises(SystemExit) as exit_status:
+        main(["check", "--config", str(config)])
+    out = capsys.readouterr()
+    assert exit_status.value.code == 0, out.err
+    assert out.out.rstrip().endswith("OK")
+    return out.out
+
+
+def test_every_opendbc_dbc_gives_a_config_check_accepts_or_one_error_naming_what_it_lacks(tmp_path, capsys):
     outcomes = Counter()
     names = dbc_names()
     assert len(names) >= 90  # files and generated ones
@@ -61,8 +74,10 @@ def test_every_opendbc_dbc_gives_a_config_check_accepts_or_one_error_naming_what
             assert not out.exists()
             continue
         write_new(out, text)
-        config = load_config(out)  # what `canest check` loads
+        config = load_config(out)
         assert set(config.signals) == set(found) >= set(BASE_INPUTS), name
+        checked = full_check(out, capsys)
+        assert "raw counts" not in checked, (name, checked)  # init overrode every raw-style range it took
         outcomes["config written"] += 1
     print(f"\ncanest init over {len(names)} opendbc DBCs: {dict(outcomes)}")
     assert outcomes["config written"] >= 5
@@ -123,3 +138,39 @@ def test_init_from_a_car_alone_takes_its_own_dbc(tmp_path):
     document = yaml.safe_load(result.stdout)
     assert document["input"]["dbc"] == "opendbc:ford_lincoln_base_pt"
     assert document["vehicle"]["name"] == "ford-focus-mk4"
+
+
+def test_a_file_of_opendbc_s_own_is_written_by_its_name_and_no_scratch_path_is_shown(tmp_path):
+    """The generated DBC in canest's cache (or opendbc's package folder) moves with a cache clean or an install:
+    the config names it opendbc:NAME. Its tolerated problems name the DBC as given, not init's scratch folder."""
+    from canest.codec.opendbc_dbcs import opendbc_path
+
+    cached = opendbc_path("toyota_nodsu_pt_generated", "test")
+    result = canest("init", cached, "--out", tmp_path / "rav4.yaml")
+    assert result.returncode == 0, result.stderr
+    text = (tmp_path / "rav4.yaml").read_text()
+    assert yaml.safe_load(text)["input"]["dbc"] == "opendbc:toyota_nodsu_pt_generated"
+    assert str(cached.parent) not in text and "canest-init-" not in text + result.stderr
+    assert "the config: input.dbc opendbc:toyota_nodsu_pt_generated: The signals PCS_TEMP and SET_ME_X10 are " \
+           "overlapping" in result.stderr
+    signals = yaml.safe_load(text)["input"]["signals"]
+    assert signals["yaw_rate"] == {"signal": "KINEMATICS.YAW_RATE", "range": "none"}
+    static = Path(opendbc.DBC_PATH) / "ford_lincoln_base_pt.dbc"
+    assert yaml.safe_load(canest("init", static).stdout)["input"]["dbc"] == "opendbc:ford_lincoln_base_pt"
+
+
+def test_the_config_init_writes_for_a_toyota_drives_it_without_an_edit(tmp_path):
+    """opendbc's RAV4 as it ships: init overrides the raw-count KINEMATICS ranges (range: none) and gives no cycle
+    time (the DBC has none: replay measures them); with the DBC's ranges the negative values are rejected."""
+    from tests.test_toyota_drive import drive
+
+    out = tmp_path / "rav4.yaml"
+    write_new(out, starting_config("opendbc:toyota_nodsu_pt_generated", car="TOYOTA_RAV4_TSS2", out=out)[0])
+    summary, errors, normal = drive(load_config(out), tmp_path, "init")
+    assert normal >= 0.99 and summary["decoded"] == summary["frames"]
+    assert errors["vx"] < 0.1 and errors["yaw_rate"] < math.radians(0.5)
+    document = yaml.safe_load(out.read_text())
+    document["input"]["signals"]["yaw_rate"] = document["input"]["signals"]["yaw_rate"]["signal"]
+    out.write_text(yaml.safe_dump(document))
+    summary, _, normal = drive(load_config(out), tmp_path, "dbc_range")
+    assert summary["rejected_out_of_range"] > 100 and normal < 0.9

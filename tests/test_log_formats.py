@@ -18,7 +18,7 @@ from canest.errors import InputFileError
 from canest.io.logfiles import expand_logs
 from canest.io.sniff import sniff_format
 from canest.sim.simulate import simulate
-from tests.conftest import ROOT
+from tests.conftest import FORD, ROOT, ford_config, realdata
 
 CANEST = [sys.executable, "-m", "canest"]
 WRITERS = {".log": can.CanutilsLogWriter, ".asc": can.ASCWriter, ".trc": can.TRCWriter, ".csv": can.CSVWriter,
@@ -173,9 +173,8 @@ def test_the_ford_log_is_read_under_its_own_name_as_under_a_log_suffix(tmp_path)
     """The real drive as recorded (``.candump``) and as ``.log``: the same frames, decoded the same."""
     from canest.config import load_config
 
-    ford = ROOT.parent / "shared" / "realdata" / "ford_fusion_2017"
-    log = ford / "acc_on_speed_changing_from_30km_to_80km_per_hour.candump"
-    config = load_config(ROOT / "configs" / "ford_fusion_2017.yaml")
+    log = realdata(FORD, "acc_on_speed_changing_from_30km_to_80km_per_hour.candump")
+    config = load_config(ford_config(tmp_path))
     renamed = tmp_path / "drive.log"
     shutil.copy(log, renamed)
     as_recorded, as_log = run(config, log), run(config, renamed)

@@ -12,11 +12,14 @@ replaces a file.
 """
 from __future__ import annotations
 
+import logging
 import os
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
+from canest.codec.opendbc_dbcs import opendbc_name_of
+from canest.codec.raw_range import raw_style
 from canest.config import DEFAULT_CONFIG, load_config
 from canest.config.discover import candidates
 from canest.config.opendbc_cars import CAR_SOURCES, PREFIX, car_parameters, dbc_text
@@ -26,6 +29,7 @@ from canest.io.outputs import OutputFile, is_stdio, open_stdout
 from canest.limits import VEHICLE
 from canest.signals import INPUT_GROUPS, LINEAR_SPEED_UNITS, normal_unit
 
+CONFIG_LOG = logging.getLogger("canest.config")  # the config loader's warnings (a tolerated DBC problem)
 ORDER = (*BASE_INPUTS, *INPUT_GROUPS["motor_torques"])  # the inputs init looks for, in the config's order
 
 
@@ -39,9 +43,15 @@ class DbcSource:
 
 
 def dbc_source(given: str, out) -> DbcSource:
-    """``opendbc:NAME`` or a DBC path; a path is written relative to the config's folder (absolute for stdout)."""
+    """``opendbc:NAME`` or a DBC path; a path is written relative to the config's folder (absolute for stdout).
+
+    A file of opendbc's own (its package folder, canest's cache of generated DBCs) is written ``opendbc:NAME``:
+    those folders move with an install or a cache clean, the name does not."""
     if given.startswith(PREFIX):
         return DbcSource(dbc_text(given[len(PREFIX):]), given, given)
+    name = opendbc_name_of(given)
+    if name:
+        return DbcSource(dbc_text(name), PREFIX + name, PREFIX + name)
     path = Path(given)
     try:
         text = path.read_text(encoding="utf-8", errors="replace")
@@ -85,24 +95,32 @@ def vehicle_lines(name: str, car: str | None) -> list:
     return lines
 
 
-def signal_lines(found: dict) -> list:
-    """``input.signals`` entries, each with why it was taken and the runners-up, for the user to confirm."""
+def signal_lines(found: dict, database) -> list:
+    """``input.signals`` entries, each with why it was taken and the runners-up, for the user to confirm.
+
+    A signal whose DBC range is raw-style (:mod:`canest.codec.raw_range`) gets ``range: none``."""
     lines = []
     for canonical in ORDER:
         if canonical not in found:
             continue
         best, *others = found[canonical]
         notes = [f"ASSUMED unit {best.unit}: the DBC gives none" if best.assumed else f"unit {best.unit}"]
+        keys = {"unit": best.unit} if best.assumed else {}
+        signal = database.get_message_by_name(best.message).get_signal_by_name(best.signal)
+        if raw_style(signal):
+            notes.append(f"range none: the DBC's [{signal.minimum:g}|{signal.maximum:g}] is raw counts")
+            keys["range"] = "none"
         if canonical.startswith("wheel_speed_") and normal_unit(best.unit) in LINEAR_SPEED_UNITS:
             notes.append("a linear speed: rad/s through vehicle.wheel_radius")
         if others:
             notes.append("else: " + ", ".join(o.reference for o in others))
-        entry = f"{{signal: {best.reference}, unit: {best.unit}}}" if best.assumed else best.reference
+        entry = "{" + ", ".join(f"{k}: {v}" for k, v in {"signal": best.reference, **keys}.items()) + "}" \
+            if keys else best.reference
         lines.append(f"    {canonical}: {entry}    # CONFIRM: {'; '.join(notes)}")
     return lines
 
 
-def config_text(source: DbcSource, found: dict, name: str, car: str | None) -> str:
+def config_text(source: DbcSource, database, found: dict, name: str, car: str | None) -> str:
     header = [
         f"# A starting config written by `canest init` from {source.label}"
         + (f" and opendbc's car {car}" if car else "") + ".",
@@ -117,7 +135,7 @@ def config_text(source: DbcSource, found: dict, name: str, car: str | None) -> s
     body = [
         "", *vehicle_lines(name, car), "",
         "input:", f"  dbc: {source.reference}", "  bus: {interface: socketcan, channel: can0}", "  signals:",
-        *signal_lines(found), "",
+        *signal_lines(found, database), "",
         "output:", "  dbc: builtin:canest_estimates.dbc", "  bus: {interface: socketcan, channel: can1}", "",
         "estimator:", "  filter: ckf", "  rate_hz: 100",
     ]
@@ -135,28 +153,51 @@ def lacking(source: DbcSource, found: dict) -> None:
                        "\"Your car\"); nothing written")
 
 
+class _ScratchNamed(logging.Filter):
+    """Rewrites the scratch folder's paths in the config loader's warnings to the names the user gave."""
+
+    def __init__(self, names: dict):
+        super().__init__()
+        self.names = names
+
+    def rename(self, text: str) -> str:
+        for scratch, given in self.names.items():
+            text = text.replace(scratch, given)
+        return text
+
+    def filter(self, record) -> bool:
+        record.msg, record.args = self.rename(record.getMessage()), None
+        return True
+
+
 def validated(text: str, source: DbcSource) -> None:
-    """Load ``text`` as ``canest check`` does, in a scratch folder holding the DBC; any error names the DBC."""
+    """Load ``text`` as ``canest check`` does, in a scratch folder holding the DBC; an error or warning names
+    the DBC as given, never the scratch folder."""
     with tempfile.TemporaryDirectory(prefix="canest-init-") as folder:
         dbc = Path(folder) / "input.dbc"
         dbc.write_text(source.text, encoding="utf-8")
         config = Path(folder) / "config.yaml"
         config.write_text(text.replace(f"  dbc: {source.reference}\n", f"  dbc: {dbc}\n", 1), encoding="utf-8")
+        scratch = _ScratchNamed({str(config): "the config", str(dbc): source.label})
+        CONFIG_LOG.addFilter(scratch)
         try:
             load_config(config)
         except ConfigError as exc:
-            reason = str(exc).replace(str(config), "the config").replace(f"{dbc}: ", "")
-            raise type(exc)(f"{source.label}: the config init would write does not load: {reason}") from None
+            raise type(exc)(f"{source.label}: the config init would write does not load: "
+                            f"{scratch.rename(str(exc))}") from None
+        finally:
+            CONFIG_LOG.removeFilter(scratch)
 
 
 def starting_config(given_dbc: str | None, car: str | None = None, out=None) -> tuple:
     """(the config's text, the inputs found) for the DBC ``given_dbc`` (or ``car``'s own when None)."""
     params_dbc = car_parameters(car)["dbc"] if car and given_dbc is None else None
     source = dbc_source(given_dbc or f"{PREFIX}{params_dbc}", out)
-    found = candidates(parse_dbc(source))
+    database = parse_dbc(source)
+    found = candidates(database)
     lacking(source, found)
     name = (car or Path(source.label.removeprefix(PREFIX)).stem).lower().replace("_", "-")
-    text = config_text(source, found, name, car)
+    text = config_text(source, database, found, name, car)
     validated(text, source)
     return text, found
 

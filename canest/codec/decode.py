@@ -59,6 +59,11 @@ MIN_TIMEOUT = 0.05  # s
 MAX_COUNTER_DELTA = 3  # accept up to two lost frames between consecutive counters (AUTOSAR E2E MaxDeltaCounter)
 
 
+def timeout(cycle_time: float, timeout_cycles: float) -> float:
+    """How long an input counts as fresh: ``timeout_cycles`` of its message's cycle, at least ``MIN_TIMEOUT``."""
+    return max(timeout_cycles * cycle_time, MIN_TIMEOUT)
+
+
 class InputDecoder:
     """Decode mapped frames into ``[(canonical, si_value), ...]``; count what is not used.
 
@@ -100,7 +105,7 @@ class InputDecoder:
 
     def timeouts(self, timeout_cycles: float) -> dict:
         """Per canonical input: ``timeout_cycles`` times its message's cycle time (at least ``MIN_TIMEOUT``)."""
-        return {name: max(timeout_cycles * self.cycle_time(name), MIN_TIMEOUT) for name in self.frame_of}
+        return {name: timeout(self.cycle_time(name), timeout_cycles) for name in self.frame_of}
 
     @property
     def frame_ids(self):

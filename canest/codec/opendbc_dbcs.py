@@ -58,6 +58,23 @@ def _write_once(path: Path, text: str) -> None:
     os.replace(temporary, path)
 
 
+def _temp_cache_dir() -> Path:
+    """Where generated DBCs go when the cache folder is not writable: a folder of this user's in the temp dir."""
+    return Path(tempfile.gettempdir()) / f"canest-{os.getuid()}" / _cache_dir().name
+
+
+def opendbc_name_of(path) -> str | None:
+    """``NAME`` if ``path`` is a file of opendbc's DBCs (in its package or canest's cache of generated ones, both
+    folders that move with an install or a cache clean), else None; None also without opendbc."""
+    try:
+        import opendbc
+    except ImportError:
+        return None
+    path = Path(path).resolve()
+    folders = {Path(opendbc.DBC_PATH).resolve(), _cache_dir().resolve(), _temp_cache_dir().resolve()}
+    return path.stem if path.suffix == ".dbc" and path.parent in folders else None
+
+
 def opendbc_path(name: str, feature: str) -> Path | None:
     """The file of opendbc's DBC ``name`` (a generated one written to the cache first); None if opendbc has none."""
     opendbc = _opendbc(feature)
@@ -67,7 +84,7 @@ def opendbc_path(name: str, feature: str) -> Path | None:
         try:
             _write_once(path, generated)
         except OSError:  # no writable cache (a service user without a home): a folder of its own in the temp dir
-            path = Path(tempfile.gettempdir()) / f"canest-{os.getuid()}" / path.parent.name / path.name
+            path = _temp_cache_dir() / path.name
             _write_once(path, generated)
         return path
     path = Path(opendbc.DBC_PATH) / f"{name}.dbc"

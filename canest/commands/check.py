@@ -6,6 +6,7 @@ import json
 from canest.commands.common import FORMATTER, add_config, config_from_args
 from canest.codec.decode import InputDecoder
 from canest.codec.encode import EstimateEncoder
+from canest.codec.raw_range import raw_range_warnings
 from canest.codec.reach import input_shortfalls, output_shortfalls
 from canest.estimation.catalog import losses
 from canest.signals import si_unit
@@ -18,11 +19,13 @@ EPILOG = """examples:
 Every error names the file, the line and the key, message or signal.
 Inputs the config does not map are listed with what each costs: the models
 and filters of the catalog that need it, and the states not estimated then.
-Signals whose range stops short of what cars reach are warned about.
+Signals whose range stops short of what cars reach are warned about, and so
+is each signal whose DBC range is in raw counts ([0|65535] for signed values)
+where the config gives no range.
 --json prints one object: config, vehicle, input, output, filter, signals
 (canonical, message, signals, frame_id, cycle_time, cycle_time_from, timeout,
 unit, factor, offset, overrides), integrity, tolerated, missing_inputs,
-range_warnings, ok.
+range_warnings, raw_range_warnings, ok.
 Exit status 0 when the config is usable, 2 when it is not."""
 
 
@@ -92,6 +95,7 @@ def _report(config, decoder, encoder) -> dict:
         "tolerated": dict(config.tolerated),
         "missing_inputs": losses(config.signals),
         "range_warnings": input_shortfalls(config.signals) + output_shortfalls(encoder.database),
+        "raw_range_warnings": raw_range_warnings(config.signals, decoder.database),
         "ok": True,
     }
 
@@ -120,7 +124,8 @@ def _print(report: dict) -> None:
         print(f"tolerated in the input DBC ({f'no signal is taken from {message}' if message else 'lenient load'}): "
               f"{problem}")
     for title, lines in (("inputs not mapped, and what they cost:", report["missing_inputs"]),
-                         ("warning: signal ranges short of what cars reach:", report["range_warnings"])):
+                         ("warning: signal ranges short of what cars reach:", report["range_warnings"]),
+                         ("warning: DBC ranges in raw counts, frames outside rejected:", report["raw_range_warnings"])):
         if lines:
             print(f"\n{title}")
             print("\n".join(f"  {line}" for line in lines))
