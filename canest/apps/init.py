@@ -17,6 +17,7 @@ import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
+from canest.codec.dbc import parse_dbc_text
 from canest.config import DEFAULT_CONFIG, load_config
 from canest.config.discover import candidates
 from canest.config.opendbc_cars import CAR_SOURCES, PREFIX, car_parameters, dbc_text
@@ -57,14 +58,12 @@ def dbc_source(given: str, out) -> DbcSource:
 
 
 def parse_dbc(source: DbcSource):
-    """The DBC's cantools database, read leniently (canest's loader judges it again when the config loads)."""
-    import cantools
-
+    """The DBC's cantools database, read leniently and repaired where cantools refuses it (canest's loader judges it
+    again when the config loads)."""
     try:
-        return cantools.database.load_string(source.text, database_format="dbc", strict=False)
-    except Exception as exc:  # cantools raises several parser exception types
-        reason = " ".join(str(exc).split())
-        raise DbcError(f"{source.label}: cannot load DBC: {reason[:300]}; fix the DBC or name another") from None
+        return parse_dbc_text(source.text, source.label)[0]
+    except DbcError as exc:
+        raise DbcError(f"{exc}; fix the DBC or name another") from None
 
 
 def _number(value: float) -> str:
