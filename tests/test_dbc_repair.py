@@ -19,31 +19,20 @@ def repaired(function, text, *args):
     return "\n".join(lines), repairs
 
 
-def test_a_signal_comment_without_a_signal_name_becomes_the_message_comment():
-    text, repairs = repaired(dbc_repair.signal_comment_without_signal,
-                             'CM_ SG_ 304 "platform-agnostic";\nCM_ SG_ 304 PEDAL "ok";')
-    assert text == 'CM_ BO_ 304 "platform-agnostic";\nCM_ SG_ 304 PEDAL "ok";'
-    assert [r.line for r in repairs] == [1]
-
-
-def test_a_comment_of_an_id_without_bo_becomes_a_message_comment():
-    text, repairs = repaired(dbc_repair.comment_without_object, 'CM_ 145 "pedal";\nCM_ BO_ 145 "x";')
-    assert text == 'CM_ BO_ 145 "pedal";\nCM_ BO_ 145 "x";' and [r.line for r in repairs] == [1]
-
-
-def test_a_missing_semicolon_after_a_one_line_comment_or_value_table_is_added():
-    text, repairs = repaired(dbc_repair.missing_semicolon,
-                             'CM_ "Front target"\nVAL_ 320 OFF 2 "PERMANENT" 1 "TEMP"\nCM_ "multi\nline";\n'
-                             'VAL_ 3 A 1 "x" ;')
-    assert text == 'CM_ "Front target";\nVAL_ 320 OFF 2 "PERMANENT" 1 "TEMP";\nCM_ "multi\nline";\nVAL_ 3 A 1 "x" ;'
-    assert [r.line for r in repairs] == [1, 2]
-
-
-def test_a_number_without_a_digit_before_its_point_gets_a_leading_zero_on_signal_lines_only():
-    text, repairs = repaired(dbc_repair.bare_decimal_point,
-                             ' SG_ TORQ : 4|13@0+ (.25,-.5) [-500|.75] "NM" XXX\nCM_ BO_ 1 "costs .25";')
-    assert text == ' SG_ TORQ : 4|13@0+ (0.25,-0.5) [-500|0.75] "NM" XXX\nCM_ BO_ 1 "costs .25";'
-    assert [r.line for r in repairs] == [1]
+@pytest.mark.parametrize("function, source, expected, lines", [
+    (dbc_repair.signal_comment_without_signal, 'CM_ SG_ 304 "platform-agnostic";\nCM_ SG_ 304 PEDAL "ok";',
+     'CM_ BO_ 304 "platform-agnostic";\nCM_ SG_ 304 PEDAL "ok";', [1]),
+    (dbc_repair.comment_without_object, 'CM_ 145 "pedal";\nCM_ BO_ 145 "x";',
+     'CM_ BO_ 145 "pedal";\nCM_ BO_ 145 "x";', [1]),
+    (dbc_repair.missing_semicolon,
+     'CM_ "Front target"\nVAL_ 320 OFF 2 "PERMANENT" 1 "TEMP"\nCM_ "multi\nline";\nVAL_ 3 A 1 "x" ;',
+     'CM_ "Front target";\nVAL_ 320 OFF 2 "PERMANENT" 1 "TEMP";\nCM_ "multi\nline";\nVAL_ 3 A 1 "x" ;', [1, 2]),
+    (dbc_repair.bare_decimal_point, ' SG_ TORQ : 4|13@0+ (.25,-.5) [-500|.75] "NM" XXX\nCM_ BO_ 1 "costs .25";',
+     ' SG_ TORQ : 4|13@0+ (0.25,-0.5) [-500|0.75] "NM" XXX\nCM_ BO_ 1 "costs .25";', [1]),
+])
+def test_a_line_repair_changes_only_the_lines_cantools_refuses(function, source, expected, lines):
+    text, repairs = repaired(function, source)
+    assert text == expected and [repair.line for repair in repairs] == lines
 
 
 def test_a_name_starting_with_a_digit_is_renamed_everywhere_it_is_used():

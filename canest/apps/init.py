@@ -22,7 +22,7 @@ from canest.config import DEFAULT_CONFIG, load_config
 from canest.config.discover import candidates
 from canest.config.opendbc_cars import CAR_SOURCES, PREFIX, car_parameters, dbc_text
 from canest.errors import ConfigError, DbcError, InputFileError, OutputFileError
-from canest.estimation.catalog import BASE_INPUTS, losses
+from canest.estimation.catalog import BASE_INPUTS, losses, unmet
 from canest.io.outputs import OutputFile, is_stdio, open_stdout
 from canest.limits import VEHICLE
 from canest.signals import INPUT_GROUPS, LINEAR_SPEED_UNITS, normal_unit
@@ -125,7 +125,7 @@ def config_text(source: DbcSource, found: dict, name: str, car: str | None) -> s
 
 def lacking(source: DbcSource, found: dict) -> None:
     """A DbcError naming the inputs every model needs that the DBC lacks (None if it has them all)."""
-    missing = [name for name in BASE_INPUTS if name not in found]
+    missing = unmet(BASE_INPUTS, found)
     if missing:
         costs = [line for line in losses(set(found)) if any(f"{name}," in line or f"{name})" in line
                                                              for name in missing)]
