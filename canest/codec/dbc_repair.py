@@ -65,13 +65,13 @@ def name_starting_with_digit(lines: list) -> list:
     attributes), so whatever refers to it still does.
     """
     definition = re.compile(r"^(?:BO_ \d+ |\s+SG_ )(\d+[A-Za-z_]\w*)\b")
-    repairs = []
+    repairs, names = [], set()
     for number, line in enumerate(lines, 1):
         match = definition.match(line)
         if match:
-            name = match.group(1)
-            repairs.append(Repair(number, f"name {name!r} starts with a digit: renamed '_{name}'"))
-    for name in {repair.what.split("'")[1] for repair in repairs}:
+            names.add(match.group(1))
+            repairs.append(Repair(number, f"name {match.group(1)!r} starts with a digit: renamed '_{match.group(1)}'"))
+    for name in names:
         word = re.compile(rf"(?<![\w.]){re.escape(name)}(?![\w.])")
         lines[:] = [word.sub(f"_{name}", line) for line in lines]
     return repairs
