@@ -93,7 +93,7 @@ def test_a_dbc_without_accelerometers_is_one_line_naming_the_inputs_it_lacks_and
     dbc = tmp_path / "car.dbc"
     dbc.write_text(NO_ACCELEROMETER)
     error = one_line_error(canest("init", "--dbc", dbc, "--out", tmp_path / "car.yaml"), 2,
-                           f"{dbc}: no signal found for ax, ay", "no model runs", "nothing written")
+                           f"{dbc}: no signal found for ay (", "no model runs", "nothing written")  # ax: derived
     assert "yaw_rate," not in error.split("(")[0]  # the yaw rate without a unit was found
     assert not (tmp_path / "car.yaml").exists()
 
@@ -190,6 +190,9 @@ def test_losses_come_from_the_catalog():
     needing = [name for name, entry in CATALOG.items() if "motor_torque_rl" in entry.required_inputs]
     assert needing and f"model {', '.join(needing)} unavailable" in no_torques[0]
     assert "single_track" not in no_torques[0]  # it runs without them
+    assert losses(everything - {"ax"}) == ["ax derived from wheel speeds"]  # required unless wheel speeds are mapped
+    no_ax, = [line for line in losses(everything - {"ax", "wheel_speed_fl"}) if "(ax)" in line]
+    assert "no model runs" in no_ax
     no_ay, = [line for line in losses(everything - {"ay"}) if "(ay)" in line]
     assert "no model runs" in no_ay and "vx" in no_ay
     second_imu, = losses(everything - {"yaw_rate_2"})

@@ -18,13 +18,14 @@ import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
+from canest.codec.dbc import parse_dbc_text
 from canest.codec.opendbc_dbcs import opendbc_name_of
 from canest.codec.raw_range import raw_style
 from canest.config import DEFAULT_CONFIG, load_config
 from canest.config.discover import candidates
 from canest.config.opendbc_cars import CAR_SOURCES, PREFIX, car_parameters, dbc_text
 from canest.errors import ConfigError, DbcError, InputFileError, OutputFileError
-from canest.estimation.catalog import BASE_INPUTS, losses
+from canest.estimation.catalog import BASE_INPUTS, losses, unmet
 from canest.io.outputs import OutputFile, is_stdio, open_stdout
 from canest.limits import VEHICLE
 from canest.signals import INPUT_GROUPS, LINEAR_SPEED_UNITS, normal_unit
@@ -67,14 +68,12 @@ def dbc_source(given: str, out) -> DbcSource:
 
 
 def parse_dbc(source: DbcSource):
-    """The DBC's cantools database, read leniently (canest's loader judges it again when the config loads)."""
-    import cantools
-
+    """The DBC's cantools database, read leniently and repaired where cantools refuses it (canest's loader judges it
+    again when the config loads)."""
     try:
-        return cantools.database.load_string(source.text, database_format="dbc", strict=False)
-    except Exception as exc:  # cantools raises several parser exception types
-        reason = " ".join(str(exc).split())
-        raise DbcError(f"{source.label}: cannot load DBC: {reason[:300]}; fix the DBC or name another") from None
+        return parse_dbc_text(source.text, source.label)[0]
+    except DbcError as exc:
+        raise DbcError(f"{exc}; fix the DBC or name another") from None
 
 
 def _number(value: float) -> str:
@@ -144,7 +143,7 @@ def config_text(source: DbcSource, database, found: dict, name: str, car: str | 
 
 def lacking(source: DbcSource, found: dict) -> None:
     """A DbcError naming the inputs every model needs that the DBC lacks (None if it has them all)."""
-    missing = [name for name in BASE_INPUTS if name not in found]
+    missing = unmet(BASE_INPUTS, found)
     if missing:
         costs = [line for line in losses(set(found)) if any(f"{name}," in line or f"{name})" in line
                                                              for name in missing)]

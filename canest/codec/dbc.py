@@ -8,15 +8,22 @@ A messy DBC still loads: when cantools refuses it strictly (overlapping
 signals, a signal that does not fit its message), it is loaded leniently and
 each message is checked on its own; :func:`tolerated_problems` names the broken
 ones. Whoever uses a message must refuse it if it is broken (the signal map,
-the estimate encoder); the others are only reported.
+the estimate encoder); the others are only reported. A ``.dbc`` file cantools
+cannot parse at all is parsed again after the text repairs of
+:mod:`canest.codec.dbc_repair`, each logged as a warning naming its line.
 """
 from __future__ import annotations
 
+import logging
 import math
 import os
 from pathlib import Path
 
+from canest.codec.dbc_repair import repair_lines, unused_value_tables
 from canest.errors import DbcError
+
+LOG = logging.getLogger("canest.dbc")
+DBC_ENCODING = "cp1252"  # cantools' default for a .dbc file
 
 _CACHE: dict = {}  # resolved path -> ((size, mtime_ns), database, {message name: problem})
 
@@ -34,17 +41,67 @@ def load_database(path, owner: str):
     cached = _CACHE.get(path)
     if cached is not None and cached[0] == stamp:
         return cached[1]
-    problems = {}
+    database, problems = _parse(path, owner)
+    _CACHE[path] = (stamp, database, problems)
+    return database
+
+
+def _parse(path: Path, owner: str):
+    """(database, {message name: problem}): strict, else lenient, else (a ``.dbc``) after the text repairs."""
+    import cantools
+
     try:
-        database = cantools.database.load_file(str(path), strict=True)
+        return cantools.database.load_file(str(path), strict=True), {}
     except Exception as strict_error:  # cantools raises several parser exception types
         try:
             database = cantools.database.load_file(str(path), strict=False)
         except Exception as exc:
-            raise DbcError(f"{path}: cannot load DBC (referenced by {owner}): {exc}") from None
-        problems = _message_problems(database) or {"": str(strict_error)}
-    _CACHE[path] = (stamp, database, problems)
-    return database
+            if path.suffix.lower() != ".dbc":
+                raise DbcError(f"{path}: cannot load DBC (referenced by {owner}): {exc}") from None
+            database, repairs = parse_dbc_text(path.read_text(encoding=DBC_ENCODING), str(path),
+                                               f" (referenced by {owner})")
+            return database, _repaired_problems(database, repairs)
+        return database, _message_problems(database) or {"": str(strict_error)}
+
+
+def parse_dbc_text(text: str, label: str, context: str = ""):
+    """(database, repairs) of the DBC ``text``, read leniently; if cantools refuses it, after
+    :mod:`canest.codec.dbc_repair`'s repairs, each logged as a warning naming ``label`` and its line.
+
+    A text no repair makes loadable is a one-line :class:`DbcError` ``LABEL: cannot load DBC CONTEXT: why``.
+    """
+    import cantools
+
+    lines, repairs = None, []
+    while True:
+        try:
+            database = cantools.database.load_string(text if lines is None else "\n".join(lines),
+                                                      database_format="dbc", strict=False)
+            break
+        except Exception as exc:  # cantools raises several parser exception types
+            if lines is None:
+                lines = text.split("\n")
+                repairs = repair_lines(lines)
+                continue
+            more = unused_value_tables(lines, str(exc))
+            if not more:
+                note = f" (after {len(repairs)} repairs)" if repairs else ""
+                reason = " ".join(str(exc).split())[:300]
+                raise DbcError(f"{label}: cannot load DBC{context}: {reason}{note}") from None
+            repairs.extend(more)
+    for repair in repairs:
+        LOG.warning("%s:%d: %s (repaired before parsing)", label, repair.line, repair.what)
+    return database, repairs
+
+
+def _repaired_problems(database, repairs) -> dict:
+    """The strict check's problems of a repaired DBC, its dropped messages, and '' for the repairs themselves."""
+    problems = _message_problems(database)
+    problems.update({repair.dropped_message: repair.what for repair in repairs if repair.dropped_message})
+    shown = "; ".join(f"line {repair.line}: {repair.what}" for repair in repairs[:3])
+    more = f"; and {len(repairs) - 3} more" if len(repairs) > 3 else ""
+    problems[""] = f"{len(repairs)} lines repaired before parsing: {shown}{more}"
+    return problems
 
 
 def _message_problems(database) -> dict:

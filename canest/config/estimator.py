@@ -68,11 +68,12 @@ def _check_filter_options(doc: Document, est: EstimatorConfig) -> None:
 
 
 def check_model_inputs(doc: Document, est: EstimatorConfig, specs: dict) -> None:
-    """Every input the model needs, and those the filter adds (the DICI-GFCKF's second IMU)."""
+    """Every input the model needs, and those the filter adds (the DICI-GFCKF's second IMU); an input the estimator
+    derives from mapped ones (ax from the wheel speeds) need not be mapped."""
     entry = catalog.CATALOG[est.model]
     for reason, needed in (("the estimator", catalog.BASE_INPUTS),
                            (f"model '{est.model}'", entry.required_inputs),
                            (f"filter '{est.filter}'", entry.inputs_for(est.filter))):
-        missing = [name for name in needed if name not in specs]
+        missing = catalog.unmet(needed, specs)
         if missing:
             raise doc.error(("input", "signals"), f"{reason} needs {', '.join(missing)}")

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+from canest.estimation.derived_ax import NAME as DERIVED_AX, NOTE as DERIVED_AX_NOTE, derives_ax
 from canest.estimation.single_track import SingleTrackEstimator
 from canest.estimation.tire_force import TireForceEstimator
 from canest.estimation.two_track import FrictionEstimator
@@ -27,6 +28,18 @@ from canest.estimation.estimate import OUTPUT_STATES
 from canest.signals import INPUT_GROUPS, WHEELS
 
 BASE_INPUTS = ("steering_wheel_angle", "ax", "ay", "yaw_rate", *(f"wheel_speed_{w}" for w in WHEELS))
+
+
+def derived_inputs(mapped) -> dict:
+    """{input: how it is derived} for the required inputs not mapped that the estimator computes from mapped ones:
+    ax is required unless the wheel speeds are mapped (:mod:`canest.estimation.derived_ax`)."""
+    return {DERIVED_AX: DERIVED_AX_NOTE} if derives_ax(mapped) else {}
+
+
+def unmet(needed, mapped) -> list:
+    """The inputs of ``needed`` neither mapped nor derived from mapped ones."""
+    derived = derived_inputs(mapped)
+    return [name for name in needed if name not in mapped and name not in derived]
 
 
 @dataclass(frozen=True)
@@ -95,10 +108,11 @@ def states_of(entry: ModelEntry) -> tuple:
 def losses(mapped) -> list:
     """What each input group not (fully) in ``mapped`` costs, one line per group: the models and filters of the
     catalog that need it, what models that use it when mapped take instead, and the states that are then not
-    estimated (none lost: an empty list)."""
-    lines = []
+    estimated (none lost: an empty list); first, how each input the estimator derives is derived."""
+    derived = derived_inputs(mapped)
+    lines = list(derived.values())
     for group, inputs in INPUT_GROUPS.items():
-        missing = [name for name in inputs if name not in mapped]
+        missing = unmet(inputs, mapped)
         if not missing:
             continue
         models = [name for name, entry in CATALOG.items() if set(missing) & set(entry.required_inputs)]

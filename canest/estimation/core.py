@@ -42,6 +42,7 @@ import numpy as np
 
 from canest.estimation import channels as ch
 from canest.estimation import validity
+from canest.estimation.derived_ax import derived_ax
 from canest.estimation.estimate import OUTPUT_STATES, Estimate
 from canest.estimation.inputs import WHEEL_SPEEDS, TickInputs
 from canest.estimation.judge import DIVERGENCE_NIS, StateJudge
@@ -89,7 +90,9 @@ class Estimator:
         names = [noise_key(n) for n in model.state_names]
         self.Q = np.diag(np.array([self.est.process_noise[n] for n in names]) ** 2 * self.dt)  # per tick
         self.p0 = np.diag(np.array([self.est.initial_std[n] for n in names]) ** 2)
-        self.r_std = np.array([self.est.measurement_noise[noise_key(n)] for n in model.measurement_names])
+        self.derived_ax = derived_ax(config)
+        noise = {**self.est.measurement_noise, **self.derived_ax.noise}
+        self.r_std = np.array([noise[noise_key(n)] for n in model.measurement_names])
         self.yaw, self.beta, self.vx = (model.state_names.index(n) for n in ("yaw_rate", "beta", "vx"))
         self.filter = None
         self.low_speed = False
@@ -209,6 +212,7 @@ class Estimator:
         """One tick on the resampler's ``sample``."""
         t = sample.t
         inputs = TickInputs(sample)
+        self.derived_ax.add_to(inputs)
         self.stale_before, self.stale_now = self.stale_now, frozenset(n for n, stale in inputs.stale.items() if stale)
         missing = inputs.missing_groups()
         if not inputs.any_present():

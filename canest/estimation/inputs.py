@@ -20,6 +20,13 @@ class TickInputs:
         self.fresh = dict(zip(names, np.asarray(sample.fresh, dtype=bool).tolist()))
         self.ages = dict(zip(names, np.asarray(sample.ages, dtype=float).tolist()))
         self.at_limit = dict(zip(names, np.asarray(sample.saturated, dtype=bool).tolist()))
+        self.derived = set()  # inputs computed from others, not from the bus
+
+    def derive(self, name: str, value: float, stale: bool, fresh: bool, age: float) -> None:
+        """Add the input ``name`` computed from other inputs (:mod:`canest.estimation.derived_ax`)."""
+        self.values[name], self.stale[name], self.fresh[name], self.ages[name] = value, stale, fresh, age
+        self.at_limit[name] = False
+        self.derived.add(name)
 
     def has(self, *names) -> bool:
         """Every one of ``names`` is mapped, not stale and not saturated (a value at its DBC limit is no measurement)."""
@@ -43,9 +50,9 @@ class TickInputs:
         return any(self.has(name) for name in self.values)
 
     def missing_groups(self) -> tuple:
-        """The input groups (status message bits) with a mapped member gone stale."""
+        """The input groups (status message bits) with a mapped member gone stale (a derived one: its sources)."""
         return tuple(group for group, members in INPUT_GROUPS.items()
-                     if any(m in self.values and self.stale[m] for m in members))
+                     if any(m in self.values and m not in self.derived and self.stale[m] for m in members))
 
     def wheel_speed(self, wheel_radius: float) -> float:
         """The wheel-centre speed ``R mean(w)`` of the four wheels."""
