@@ -1,15 +1,20 @@
 """Config validation: every error names the file, the line and the key."""
+import json
 import math
 import re
 import shutil
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 import yaml
 
 from canest import limits
 from canest.config import BUILTIN_DIR, BUILTIN_PREFIX, DEFAULT_CONFIG, ConfigError, load_config
+from canest.estimation import catalog
+from canest.filters import FILTERS, make_filter
+from canest.filters.ekf import ExtendedKalmanFilter
 from canest.yamldoc import MAX_BYTES, MAX_NODES
 from tests.conftest import CONFIG, ROOT
 from tests.test_cli import canest
@@ -347,3 +352,33 @@ def test_drive_layout_keys(tmp_path):
                      r"on the front axle\)$", error_of(path))
     path = write_variant(tmp_path, lambda d: d["vehicle"].update(brake_front_share=1.5))
     assert "vehicle.brake_front_share: must be at most 1 (0 to 1), got 1.5" in error_of(path)
+
+
+def check_in_process(capsys, *args):
+    from canest.cli import main
+    with pytest.raises(SystemExit) as end:
+        main(["check", *map(str, args)])
+    assert end.value.code == 0
+    return capsys.readouterr().out
+
+
+@pytest.mark.parametrize("name", list(FILTERS))
+def test_check_names_the_factorization_the_filter_really_runs(name, tmp_path, capsys):
+    def edit(data):
+        data["estimator"].pop("factorization")  # the filter's own default
+        data["estimator"].update(filter=name, model=catalog.model_for(name))
+    config = write_variant(tmp_path, edit)
+    found = json.loads(check_in_process(capsys, "--config", config, "--json"))["filter"]
+    line = next(line for line in check_in_process(capsys, "--config", config).splitlines()
+                if line.startswith("filter"))
+    model = catalog.CATALOG[found["model"]].model
+    n = len(model.state_names)
+    built = make_filter(name, np.zeros(n), np.eye(n), model)
+    if isinstance(built, ExtendedKalmanFilter):
+        assert found["factorization"] is None and "no square root" in line
+    else:  # what the built filter (or its first inner filter: dckf, dici-gfckf) holds
+        inner = getattr(built, "states", None) or getattr(built, "locals", [built])[0]
+        runs = getattr(built, "factorization", None) or inner.factorization
+        assert found["factorization"] == runs in ("cholesky", "svd")
+        assert f"{name} ({runs} square root of P) on model {found['model']}" in line
+    assert "None" not in line and found["name"] == name

@@ -9,6 +9,7 @@ from canest.codec.encode import EstimateEncoder
 from canest.codec.raw_range import raw_range_warnings
 from canest.codec.reach import input_shortfalls, output_shortfalls
 from canest.estimation.catalog import losses
+from canest.filters import factorization_of
 from canest.signals import si_unit
 
 EPILOG = """examples:
@@ -22,10 +23,11 @@ and filters of the catalog that need it, and the states not estimated then.
 Signals whose range stops short of what cars reach are warned about, and so
 is each signal whose DBC range is in raw counts ([0|65535] for signed values)
 where the config gives no range.
---json prints one object: config, vehicle, input, output, filter, signals
-(canonical, message, signals, frame_id, cycle_time, cycle_time_from, timeout,
-unit, factor, offset, overrides), integrity, tolerated, missing_inputs,
-range_warnings, raw_range_warnings, ok.
+--json prints one object: config, vehicle, input, output, filter (name,
+model, factorization: cholesky, svd or null for the EKFs, rate_hz,
+min_speed), signals (canonical, message, signals, frame_id, cycle_time,
+cycle_time_from, timeout, unit, factor, offset, overrides), integrity,
+tolerated, missing_inputs, range_warnings, raw_range_warnings, ok.
 Exit status 0 when the config is usable, 2 when it is not."""
 
 
@@ -88,8 +90,8 @@ def _report(config, decoder, encoder) -> dict:
                     "cg_to_rear": v.cg_to_rear, "steering_ratio": v.steering_ratio},
         "input": {"dbc": str(config.input_dbc), "bus": _bus(config.input_bus)},
         "output": {"dbc": str(config.output_dbc), "bus": _bus(config.output_bus)},
-        "filter": {"name": e.filter, "factorization": e.factorization, "rate_hz": e.rate_hz,
-                   "min_speed": e.min_speed},
+        "filter": {"name": e.filter, "model": e.model, "factorization": factorization_of(e.filter, e.factorization),
+                   "rate_hz": e.rate_hz, "min_speed": e.min_speed},
         "signals": signals,
         "integrity": {name: _checks(c) for name, c in config.messages.items()},
         "tolerated": dict(config.tolerated),
@@ -107,7 +109,9 @@ def _print(report: dict) -> None:
           f"b={v['cg_to_rear']:g} m, steering ratio {v['steering_ratio']:g}")
     print(f"input    {report['input']['dbc']} on {report['input']['bus']}")
     print(f"output   {report['output']['dbc']} on {report['output']['bus']}")
-    print(f"filter   {f['name']} ({f['factorization']}) at {f['rate_hz']:g} Hz, low-speed below {f['min_speed']:g} m/s")
+    root = f"{f['factorization']} square root of P" if f["factorization"] else "no square root, P propagated"
+    print(f"filter   {f['name']} ({root}) on model {f['model']} at {f['rate_hz']:g} Hz, low-speed below "
+          f"{f['min_speed']:g} m/s")
     print()
     print(f"{'canonical':<22} {'message.signal':<40} {'id':>6} {'cycle (from)':>14} {'timeout':>8}  "
           "SI = factor * DBC value + offset")

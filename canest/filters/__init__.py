@@ -10,6 +10,8 @@ model offers (class attributes, no vehicle knowledge here), :func:`fits`
 matches the two, and :func:`make_filter` passes a filter what the model tells
 it (the parameter count and bounds, the index of an input parameter).
 """
+import inspect
+
 from canest.filters.adaptive import AdaptiveSvdFifthDegreeCKF, LimitedMemoryRandomWeightedEKF
 from canest.filters.base import Measurement, Transition
 from canest.filters.dici import DICIGeneralizedFifthDegreeCKF
@@ -41,7 +43,6 @@ FILTERS = {cls.name: cls for cls in (
     DoubleCubatureKalmanFilter,
     JointCubatureKalmanFilter,
 )}
-
 
 
 def offered_by(model) -> frozenset:
@@ -90,5 +91,14 @@ def make_filter(name: str, x0, P0, model, factorization=None, options=None):
     return FILTERS[name](x0, P0, **kwargs)
 
 
-__all__ = ["FILTERS", "FACTORIZATIONS", "Measurement", "Transition", "fits", "make_filter", "model_options",
-           "offered_by"]
+def factorization_of(name: str, configured=None):
+    """The factorization the filter ``name`` runs with: ``configured``, else the filter's own default; None for a
+    filter that takes no square root (the EKFs)."""
+    cls = FILTERS[name]
+    if not cls.factorizes:
+        return None
+    return configured or inspect.signature(cls).parameters["factorization"].default
+
+
+__all__ = ["FILTERS", "FACTORIZATIONS", "Measurement", "Transition", "factorization_of", "fits", "make_filter",
+           "model_options", "offered_by"]

@@ -66,6 +66,8 @@ class GaussianFilter:
     # "jacobian", "input_parameter" (a scalar parameter in u with d h / d parameter),
     # "state_parameters" (trailing states that are bounded parameters), "sensor_sets" (channels per sensor).
     needs: frozenset = frozenset()
+    # Whether the filter takes square roots of P (so ``factorization`` applies); the EKFs propagate P itself.
+    factorizes: bool = True
 
     def __init__(self, x0, P0):
         self.repairs = 0

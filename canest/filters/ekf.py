@@ -31,6 +31,7 @@ THETA_BOUNDS = (0.3, 2.0)
 class ExtendedKalmanFilter(GaussianFilter):
     name = "ekf"
     needs = frozenset({"jacobian"})
+    factorizes = False  # ``factorization`` is accepted for a uniform constructor and unused
 
     def __init__(self, x0, P0, factorization: str = "cholesky"):
         super().__init__(x0, P0)
