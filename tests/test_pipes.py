@@ -2,6 +2,7 @@
 output, and machine-readable output (--json) for what a script reads. Real `python -m canest` processes throughout.
 """
 import json
+import re
 import subprocess
 import sys
 import time
@@ -83,6 +84,49 @@ def test_replay_of_a_live_pipe_writes_ticks_before_the_input_ends(files):
     rest = replay.stdout.read()
     assert replay.wait(60) == 0
     assert header + first_row + rest == files["est"].read_bytes()
+
+
+def test_replay_to_redirected_stderr_has_no_progress_bar(files, tmp_path):
+    result = canest("replay", files["log"], "--config", CONFIG, "--csv", tmp_path / "est.csv")
+    assert result.returncode == 0
+    assert result.stderr == ""  # no bar text, not even a carriage return
+    assert result.stdout.startswith("frames=")
+
+
+def on_terminal(*args) -> str:
+    """What a canest command writes to a terminal of 120 columns as its stderr (stdout is a pipe)."""
+    import fcntl
+    import os
+    import pty
+    import struct
+    import termios
+
+    main_fd, terminal = pty.openpty()
+    fcntl.ioctl(terminal, termios.TIOCSWINSZ, struct.pack("HHHH", 40, 120, 0, 0))
+    process = subprocess.Popen([*CANEST, *map(str, args)], stdout=subprocess.PIPE, stderr=terminal, cwd=ROOT)
+    os.close(terminal)
+    shown = b""
+    while True:
+        try:
+            chunk = os.read(main_fd, 4096)
+        except OSError:  # the terminal's last writer has closed it
+            break
+        if not chunk:
+            break
+        shown += chunk
+    os.close(main_fd)
+    process.stdout.read()
+    assert process.wait(60) == 0
+    return shown.decode()
+
+
+def test_replay_progress_bar_on_a_terminal_counts_log_seconds_and_frames_and_stays(files, tmp_path):
+    shown = on_terminal("replay", files["log"], "--config", CONFIG, "--csv", tmp_path / "est.csv")
+    last = [part.strip() for part in re.split(r"[\r\n]", shown) if part.strip()][-1]  # what stays on screen
+    frames = files["summary"]["frames"]
+    seconds, total = map(float, re.search(r"\| ([\d.]+)/([\d.]+) \[", last).groups())
+    assert last.startswith("replay drive.log, log seconds: 100%|") and seconds == total == pytest.approx(6, abs=0.02)
+    assert last.endswith(f"{frames} frames]"), last
 
 
 def test_replay_reads_other_formats_from_stdin_with_format(files, tmp_path):

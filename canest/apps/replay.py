@@ -15,10 +15,11 @@ import time
 from contextlib import ExitStack
 
 import can
-from tqdm import tqdm
 
+from canest.apps.progress import LogTimeBar, terminal_bar
 from canest.estimation.estimate import OUTPUT_STATES
 from canest.io.logfiles import open_log
+from canest.io.outputs import is_stdio
 from canest.io.sinks import CallbackSink, CsvSink, LogSink
 from canest.pipeline import Pipeline
 from canest.settings import Config
@@ -27,21 +28,14 @@ PROGRESS_EVERY = 2000  # frames between progress-bar updates
 LOG = logging.getLogger("canest.replay")
 
 
-def progress_bar(source, desc: str, progress: bool):
-    """A bar on stderr that stays when done: bytes of a log file (with its total), else frames; none when
-    ``progress`` is off or stderr is not a terminal (a redirected stderr gets no bar)."""
-    size = source.size()
-    return tqdm(total=size, unit="B" if size else " frames", unit_scale=bool(size), desc=f"{desc} {source.path.name}",
-                disable=not (progress and sys.stderr.isatty()), leave=True)
-
-
 def replay(config: Config, log_path, out_log=None, out_csv=None, progress: bool = True, on_estimate=None,
            step_times=None, stop=None, log_format=None, log_channel=None) -> dict:
     """Run a log through the pipeline as fast as possible; return the frame summary.
 
     ``log_path`` ``-`` reads standard input as it arrives (``log_format``, ``log_channel``: see
     :class:`canest.io.logfiles.LogSource`);
-    ``out_log`` or ``out_csv`` ``-`` writes standard output.
+    ``out_log`` or ``out_csv`` ``-`` writes standard output. ``progress``: a bar of log seconds and frames on
+    stderr, left on screen, when stderr is a terminal and no output goes to a terminal on standard output.
 
     ``step_times``, a list, receives the CPU seconds (of the replaying thread) of every filter predict + update. ``stop``, anything with
     ``is_set()`` (a ``threading.Event``): once set, reading stops after the current frame, the outputs are
@@ -59,18 +53,23 @@ def replay(config: Config, log_path, out_log=None, out_csv=None, progress: bool 
                 CsvSink(out_csv, states, staged=True) if out_csv else None,
                 LogSink(out_log, pipeline.encoder, staged=True) if out_log else None,
                 CallbackSink(on_estimate) if on_estimate else None) if sink is not None]
-            bar = stack.enter_context(progress_bar(source, "replay", progress))
-            by_bytes = bar.total is not None
+            rows_on_screen = (is_stdio(out_csv) or is_stdio(out_log)) and sys.stdout.isatty()  # a bar would cut in
+            bar = stack.enter_context(LogTimeBar(source, "replay", progress and not rows_on_screen))
+            count = 0
             for count, msg in enumerate(frames, 1):
                 estimates = pipeline.feed(msg)
                 if estimates:
                     for sink in sinks:
                         sink.publish(estimates)
-                if count % PROGRESS_EVERY == 0:
-                    bar.update(source.position() - bar.n if by_bytes else PROGRESS_EVERY)
+                if count % PROGRESS_EVERY == 1:
+                    bar.at(count, msg.timestamp)
                 if stop is not None and stop.is_set():
                     stopped = True
                     break
+            if count:
+                bar.at(count, msg.timestamp)
+            if not stopped:
+                bar.finish()
     finally:
         frames.close()
         source.stop()
@@ -88,7 +87,7 @@ def play(log_path, bus: can.BusABC, speed: float = 1.0, progress: bool = True, l
     reader = open_log(log_path, log_format, log_channel)
     try:
         timed = (msg for msg in reader if math.isfinite(msg.timestamp))
-        sent = play_messages(timed, bus, speed, progress and sys.stderr.isatty(), desc=f"play {reader.path.name}")
+        sent = play_messages(timed, bus, speed, progress, desc=f"play {reader.path.name}")
     finally:
         reader.stop()
     for warning in reader.warnings():
@@ -100,10 +99,11 @@ def play(log_path, bus: can.BusABC, speed: float = 1.0, progress: bool = True, l
 
 def play_messages(messages, bus: can.BusABC, speed: float = 1.0, progress: bool = False, desc: str = "play",
                   stop=None) -> int:
-    """Send messages at the spacing of their timestamps divided by ``speed``; ``stop`` (an Event) ends early."""
+    """Send messages at the spacing of their timestamps divided by ``speed``; ``stop`` (an Event) ends early.
+    ``progress``: a bar of frames sent, on a terminal only."""
     sent = 0
     start_wall = start_log = None
-    with tqdm(desc=desc, unit=" frames", disable=not progress, leave=True) as bar:
+    with terminal_bar(progress, desc=desc, unit=" frames") as bar:
         for msg in messages:
             if stop is not None and stop.is_set():
                 break
