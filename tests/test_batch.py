@@ -23,6 +23,7 @@ from canest.apps.batch import run_batch
 from canest.apps.batch_plan import (ESTIMATES, FLEET_SUMMARY, SUMMARY, Task, complete, find_logs, fingerprint,
                                     input_root, plan)
 from canest.apps.evaluate import read_table, score
+from canest.apps.fleet_report import COLUMNS, rmse_key
 from canest.apps.replay import replay
 from canest.errors import CanestError
 from canest.sim.simulate import simulate
@@ -70,7 +71,7 @@ def test_local_cluster_matches_sequential_replay_and_resumes(config, fleet, tmp_
         expected = replayed(config, log, tmp_path)
         np.testing.assert_array_equal(result["t"], expected["t"])
         np.testing.assert_array_equal(result["yaw_rate"], expected["yaw_rate"])
-        assert row["rmse_beta"] < 1.5 and 0.9 < row["valid_share"] <= 1.0
+        assert row["beta_rmse_deg"] < 1.5 and 0.9 < row["valid_share"] <= 1.0
     assert (out / "fleet_summary.csv").read_text().count("\n") == LOGS + 2
     assert not list(out.rglob("*.tmp")), "the broken log's task left its partial CSV behind"
     assert not list((out / "south" / "broken.log").rglob("*.*")), "a failed task leaves nothing in its folder"
@@ -82,6 +83,61 @@ def test_local_cluster_matches_sequential_replay_and_resumes(config, fleet, tmp_
     messages.clear()
     run_batch(config, [str(fleet / "**" / "*.log")], out, ["ckf"], workers=2, progress=False, report=messages.append)
     assert messages[0].startswith(f"{LOGS + 1} tasks (25 logs x 1 filters): {LOGS - 1} already complete, 2 to run")
+
+
+def test_batch_json_is_the_summary_and_redirected_output_has_no_progress_bar(fleet, tmp_path):
+    """Two logs with truth, one without, a broken one: --json on stdout, every message on stderr, no bar text."""
+    logs = tmp_path / "logs"
+    logs.mkdir()
+    for name in ("drive00.log", "drive00.truth.csv", "drive01.log", "drive01.truth.csv", "drive02.log"):
+        shutil.copy(fleet / "south" / name if name[6] in "02" else fleet / "north" / name, logs / name)
+    (logs / "broken.log").write_text("not a candump line\n")
+    out = tmp_path / "results"
+    result = subprocess.run([sys.executable, "-m", "canest", "batch", str(logs / "*.log"), "--out", str(out),
+                             "--workers", "2", "--json"], capture_output=True, text=True, timeout=300)
+    assert result.returncode == 1, result.stderr  # the broken log's task failed
+    found = json.loads(result.stdout)
+    assert set(found) == {"tasks", "totals", "summary_csv", "plot", "stopped_by"}
+    assert found["summary_csv"] == str(out / FLEET_SUMMARY) and found["plot"] is found["stopped_by"] is None
+    tasks = {Path(task["log"]).name: task for task in found["tasks"]}
+    assert list(tasks) == ["broken.log", "drive00.log", "drive01.log", "drive02.log"]
+    assert all(tuple(task) == COLUMNS for task in tasks.values())
+    for name in ("drive00.log", "drive01.log", "drive02.log"):
+        task = tasks[name]
+        assert task["status"] == "ok" and task["error"] is None and task["result"] == str(out / name / "ckf")
+        stored = json.loads((out / name / "ckf" / SUMMARY).read_text())
+        assert {k: task[k] for k in ("frames", "decoded", "ticks", "duration_s", "valid_share")} == \
+            {k: stored[k] for k in ("frames", "decoded", "ticks", "duration_s", "valid_share")}
+        has_truth = name != "drive02.log"
+        for state in ("vx", "yaw_rate", "beta"):
+            assert (task[rmse_key(state)] == stored[rmse_key(state)]) if has_truth else task[rmse_key(state)] is None
+    assert tasks["broken.log"]["status"] == "failed" and "no frame could be read" in tasks["broken.log"]["error"]
+    totals = found["totals"]
+    assert {k: totals[k] for k in ("tasks", "ok", "failed", "stopped")} == {"tasks": 4, "ok": 3, "failed": 1,
+                                                                           "stopped": 0}
+    assert totals["frames"] == sum(tasks[n]["frames"] for n in ("drive00.log", "drive01.log", "drive02.log"))
+    assert totals["drive_hours"] == pytest.approx(sum(t["duration_s"] or 0 for t in tasks.values()) / 3600)
+    assert totals["tasks_per_min"] == pytest.approx(60 * 4 / totals["seconds"])
+    # the messages and the fleet table went to stderr, and no progress bar to either stream
+    assert "beta RMSE [deg] median / p95" in result.stderr and "4 tasks in" in result.stderr
+    for text in (result.stdout, result.stderr):
+        assert "\r" not in text and "task/s" not in text and "%|" not in text
+    with open(out / FLEET_SUMMARY) as handle:
+        assert tuple(csv.DictReader(handle).fieldnames) == COLUMNS
+    assert {"vx_rmse_m_s", "yaw_rate_rmse_deg_s", "beta_rmse_deg"} <= set(COLUMNS)
+
+
+def test_fleet_plot_and_table_name_the_units_of_the_errors():
+    from canest.apps.fleet_report import errors_figure, fleet_table
+    rows = [{"log": f"{i}.log", "filter": name, "status": "ok", "duration_s": 60.0, "valid_share": 0.9,
+             "vx_rmse_m_s": 0.1 * i, "yaw_rate_rmse_deg_s": 0.2 * i, "beta_rmse_deg": 0.3 * i}
+            for i in range(1, 4) for name in ("ckf", "ekf")]
+    axes = errors_figure(rows).axes
+    assert [ax.get_ylabel() for ax in axes] == ["vx RMSE [m/s]", "yaw_rate RMSE [deg/s]", "beta RMSE [deg]"]
+    assert all(ax.get_title() for ax in axes)
+    header, ckf, _ = fleet_table(rows).splitlines()
+    assert "vx RMSE [m/s]" in header and "yaw_rate RMSE [deg/s]" in header and "beta RMSE [deg]" in header
+    assert ckf.endswith("0.6000 / 0.8700") and len(ckf) == len(header)  # beta median / p95 under its header
 
 
 def replayed(config, log, folder) -> dict:
@@ -126,8 +182,8 @@ def test_logs_of_one_stem_each_get_their_results_and_truth(config, fleet, tmp_pa
         truth = log.parent / truth_of[log.name]
         assert json.loads((folder / SUMMARY).read_text())["inputs"]["truth"]["path"] == str(truth)
         scores = {s.state: s.rmse for s in score(expected, read_table(truth), ["vx", "yaw_rate", "beta"], skip=0.5)}
-        assert {state: row[f"rmse_{state}"] for state in scores} == scores
-    assert rows[2]["rmse_yaw_rate"] > 3 * rows[3]["rmse_yaw_rate"], "b.blf is scored on the wrong drive's truth"
+        assert {state: row[rmse_key(state)] for state in scores} == scores
+    assert rows[2]["yaw_rate_rmse_deg_s"] > 3 * rows[3]["yaw_rate_rmse_deg_s"], "b.blf is scored on the wrong drive's truth"
     with open(out / FLEET_SUMMARY) as handle:
         assert sorted(r["log"] for r in csv.DictReader(handle)) == sorted(r["log"] for r in rows)
 
@@ -169,7 +225,7 @@ def test_changed_inputs_are_redone_and_failed_tasks_leave_nothing(config, fleet,
         return {Path(r["log"]).name: r for r in rows}, messages
 
     rows, _ = batch()
-    assert rows["x.log"]["status"] == rows["y.log"]["status"] == "ok" and "rmse_beta" in rows["y.log"]
+    assert rows["x.log"]["status"] == rows["y.log"]["status"] == "ok" and "beta_rmse_deg" in rows["y.log"]
     if torn_error is None:
         assert rows["torn.log"]["status"] == "ok" and rows["torn.log"]["frames"] == torn_frames["frames"]
     else:

@@ -36,7 +36,8 @@ import numpy as np
 from canest.apps.batch_plan import (ESTIMATES, FLEET_SUMMARY, SUMMARY, Task, complete, find_logs, fingerprint,
                                     input_root, plan, replacing)
 from canest.apps.evaluate import read_table, score
-from canest.apps.fleet_report import STATES, write_fleet_summary
+from canest.apps.fleet_report import STATES, rmse_key, write_fleet_summary
+from canest.apps.progress import terminal_bar
 from canest.errors import ClusterError
 from canest.estimation.estimate import VALID_BITS
 from canest.settings import Config
@@ -96,7 +97,7 @@ def run_task(config: Config, task: Task, config_fingerprint: str) -> dict:
         }
         if inputs["truth"] is not None:
             truth = read_table(inputs["truth"]["path"])
-            row.update({f"rmse_{s.state}": s.rmse for s in score(table, truth, STATES, skip=0.5)})
+            row.update({rmse_key(s.state): s.rmse for s in score(table, truth, STATES, skip=0.5)})
     with replacing(task.out / SUMMARY) as partial:
         partial.write_text(json.dumps(row, indent=1))
     return row
@@ -182,13 +183,12 @@ def run_tasks(client, todo, submit, stop: Stop, progress: bool, report):
     and the running ones finish; after a second request the running ones are cancelled too.
     """
     from dask.distributed import as_completed
-    from tqdm import tqdm
 
     pending = {submit(task): task for task in todo}
     finished = as_completed(pending)
     rows, stopped = [], []
     withdrawn = False
-    with tqdm(total=len(todo), unit="task", disable=not progress) as bar:
+    with terminal_bar(progress, total=len(todo), unit="task") as bar:
         while pending:
             if stop.cancelling:
                 client.cancel(list(pending))
@@ -248,6 +248,9 @@ def run_batch(config: Config, patterns, out: Path, filters, scheduler=None, work
             discard_partial(task for task, _ in stopped)
         # a task withdrawn or cancelled as it finished may have completed after all
         rows += ran + [complete(task, config_fingerprint) or stopped_row(task, why) for task, why in stopped]
+    folders = {(str(task.log), task.filter): str(task.out) for task in tasks}
+    for row in rows:  # where it is now, also for a result written by an earlier run
+        row["result"] = folders[row["log"], row["filter"]]
     rows.sort(key=lambda r: (r["log"], r["filter"]))
     out.mkdir(parents=True, exist_ok=True)
     write_fleet_summary(rows, out / FLEET_SUMMARY)

@@ -152,12 +152,14 @@ def align(estimate: dict, truth: dict, mode: str, offset: float = 0.0) -> dict:
     return {**estimate, "t": estimate["t"] - shift}
 
 
+def plain(value):
+    """``value`` as JSON can hold it: a NaN or infinite float as None (null)."""
+    return None if isinstance(value, float) and not math.isfinite(value) else value
+
+
 def as_json(scores) -> dict:
     """``{state: {unit, rmse, mae, max_error, samples, valid, cov1, cov2, cov3, nees, vbw, wrong_sign}}``, NaN as
     null (JSON has no NaN)."""
-    def plain(value):
-        return None if isinstance(value, float) and not math.isfinite(value) else value
-
     return {s.state: {k: plain(v) for k, v in asdict(s).items() if k != "state"} for s in scores}
 
 

@@ -1,14 +1,16 @@
 """canest batch: re-estimate many logs on a Dask cluster (local by default)."""
 from __future__ import annotations
 
+import json
 import signal
+import sys
 import time
 from contextlib import contextmanager
 from pathlib import Path
 
 from canest.apps.batch import CONNECT_TIMEOUT_S, Stop, run_batch
 from canest.apps.batch_plan import FLEET_SUMMARY
-from canest.apps.fleet_report import fleet_table, plot_errors
+from canest.apps.fleet_report import fleet_json, fleet_table, plot_errors, totals
 from canest.commands.common import FORMATTER, add_config, add_log_reading, config_from_args, log_reading
 from canest.apps.compare import parse_filters
 from canest.errors import DependencyError
@@ -30,6 +32,11 @@ cancels them), the fleet summary lists the rest as stopped; rerun to resume.
 Exit status: 0 all tasks done (also after such a stop), 1 some task failed;
 an error before any task ran (config, DBC, missing dask, unreachable
 scheduler, ...) is one line with the status of its kind (canest --help).
+--json prints {tasks: [one object per task: log, filter, status, result
+(its folder), duration_s, ticks, frames, decoded, resets, valid_share,
+vx_rmse_m_s, yaw_rate_rmse_deg_s, beta_rmse_deg (null without a truth file),
+rejected, error], totals: {tasks, ok, failed, stopped, drive_hours, frames,
+seconds, tasks_per_min, drive_hours_per_min}, summary_csv, plot, stopped_by}.
 On a multi-node cluster the logs, the config, its DBCs and OUT must be on a
 file system every worker sees (start workers with: dask worker tcp://HOST:8786)."""
 
@@ -49,7 +56,10 @@ def register(subparsers) -> None:
     p.add_argument("--retries", type=int, default=1,
                    help="retries of a task that raised (default 1); tasks of a lost worker are rerun anyway")
     p.add_argument("--plot", help="PNG of the RMSE distribution over the logs (needs truth files)")
-    p.add_argument("--quiet", "-q", action="store_true", help="no progress bar")
+    p.add_argument("--json", action="store_true", help="print the batch summary as one JSON object (keys below); "
+                                                      "the other messages go to stderr")
+    p.add_argument("--quiet", "-q", action="store_true", help="no progress bar (there is none when stderr is not "
+                                                              "a terminal)")
     p.set_defaults(func=run)
 
 
@@ -73,24 +83,26 @@ def run(args) -> int:
         DependencyError.require("matplotlib", "--plot", "pip install 'canest[plot]'")
     config = config_from_args(args)
     filters = parse_filters(args.filters) if args.filters else [config.estimator.filter]
+    say = print if not args.json else lambda *line: print(*line, file=sys.stderr)
+    summary_csv = Path(args.out) / FLEET_SUMMARY
     started = time.perf_counter()
     stop = Stop()
     with stop_on_signals(stop):
         rows = run_batch(config, args.logs, Path(args.out), filters, args.scheduler, args.workers, args.retries,
-                         progress=not args.quiet, stop=stop, connect_timeout=args.connect_timeout,
+                         progress=not args.quiet, report=say, stop=stop, connect_timeout=args.connect_timeout,
                          **log_reading(args))
     elapsed = time.perf_counter() - started
-    print(fleet_table(rows))
-    ran = [r for r in rows if r["status"] == "ok"]
-    hours = sum(r["duration_s"] for r in ran) / 3600.0
-    print(f"{len(rows)} tasks in {elapsed:.1f} s: {60 * len(rows) / elapsed:.1f} tasks/min, "
-          f"{60 * hours / elapsed:.3f} drive-hours/min; summary in {Path(args.out) / FLEET_SUMMARY}")
-    stopped = [r for r in rows if r["status"] == "stopped"]
+    total = totals(rows, elapsed)
+    say(fleet_table(rows))
+    say(f"{total['tasks']} tasks in {elapsed:.1f} s: {total['tasks_per_min']:.1f} tasks/min, "
+        f"{total['drive_hours_per_min']:.3f} drive-hours/min; summary in {summary_csv}")
     if stop.requested:
-        print(f"stopped by {stop.reason}: {len(stopped)} of {len(rows)} tasks not done; "
-              "run the same command again to resume")
+        say(f"stopped by {stop.reason}: {total['stopped']} of {total['tasks']} tasks not done; "
+            "run the same command again to resume")
     if args.plot:
         plot_errors(rows, args.plot)
-        print(f"plot written to {args.plot}")
-    failed = [r for r in rows if r["status"] == "failed"]
-    return 1 if failed else 0
+        say(f"plot written to {args.plot}")
+    if args.json:
+        print(json.dumps({**fleet_json(rows, elapsed), "summary_csv": str(summary_csv), "plot": args.plot,
+                          "stopped_by": stop.reason if stop.requested else None}))
+    return 1 if total["failed"] else 0
