@@ -88,6 +88,27 @@ def test_compare_every_filter_on_one_log(dlc_run, tmp_path):
     assert (tmp_path / "compare.png").stat().st_size > 20000
 
 
+def test_compare_plot_tells_thirteen_filters_apart_and_has_titles():
+    from matplotlib.colors import to_hex
+
+    from canest.apps.compare import FilterRun, comparison_figure
+    from canest.filters import FILTERS
+
+    t = np.linspace(0.0, 5.0, 51)
+    truth = {"t": t, "vx": 20 + 0 * t, "yaw_rate": np.sin(t), "beta": 0.01 * np.sin(t)}
+    runs = [FilterRun(name, {"t": t, **{s: truth[s] + 0.01 * i for s in ("vx", "yaw_rate", "beta")}}, {}, 1.0, 0)
+            for i, name in enumerate(FILTERS)]
+    fig = comparison_figure(runs, truth)
+    for ax in fig.axes:
+        assert ax.get_title() and ax.get_ylabel()
+        looks = [(to_hex(line.get_color()), line.get_linestyle()) for line in ax.get_lines()
+                 if line.get_label() != "truth"]
+        assert len(looks) == len(set(looks)) == len(FILTERS) == 13  # no two filters share colour and dash
+        assert all(a[0] != b[0] and a[1] != b[1] for a, b in zip(looks, looks[1:]))  # neighbours differ in both
+    legend = [text.get_text() for text in fig.axes[0].get_legend().get_texts()]
+    assert legend == ["truth", *FILTERS]
+
+
 def test_compare_table_fits_a_terminal(dlc_run):
     from canest.apps.compare import format_comparison, run_filter
     from canest.apps.evaluate import read_table

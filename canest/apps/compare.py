@@ -112,8 +112,8 @@ def line_style(i: int) -> dict:
     return {"color": COLOURS[i % len(COLOURS)], "linestyle": DASHES[i % len(DASHES)]}
 
 
-def plot_comparison(runs, truth: dict, path) -> None:
-    """Estimate vs truth (left) and error (right) for each state, one line per filter."""
+def comparison_figure(runs, truth: dict):
+    """Estimate vs truth (left) and error (right) for each state, one line per filter (a matplotlib Figure)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -138,5 +138,13 @@ def plot_comparison(runs, truth: dict, path) -> None:
     for ax in axes[-1]:
         ax.set_xlabel("t [s]")
     fig.tight_layout()
+    return fig
+
+
+def plot_comparison(runs, truth: dict, path) -> None:
+    """:func:`comparison_figure` as a PNG at ``path``."""
+    import matplotlib.pyplot as plt
+
+    fig = comparison_figure(runs, truth)
     fig.savefig(path, dpi=110)
     plt.close(fig)
