@@ -9,6 +9,7 @@ import json
 import logging
 import math
 import os
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -307,3 +308,28 @@ def test_config_state_file_is_relative_to_the_config(tmp_path):
 def test_config_rejects_bad_calibration_keys_naming_file_line_and_key(tmp_path, estimator, message):
     with pytest.raises(ConfigError, match=r"car\.yaml:\d+: " + message):
         load_config(write_config(tmp_path, estimator))
+
+
+# -- command line and service -------------------------------------------------------------------------------------------
+
+def test_replay_state_file_option_learns_and_saves(drive, tmp_path):
+    from canest.cli import main
+    log, state = tmp_path / "drive.log", tmp_path / "state" / "calibration.json"
+    drive.write_log(log)
+    with pytest.raises(SystemExit) as exit_status:
+        main(["replay", str(log), "--config", str(CONFIG), "--state-file", str(state), "--quiet"])
+    assert exit_status.value.code in (0, None)
+    saved = json.loads(state.read_text())["parameters"]
+    assert saved["speed"]["value"] == pytest.approx(WRONG.wheel_radius_scale, abs=0.01)
+    assert saved["speed"]["evidence"] > 10.0
+
+
+def test_run_takes_a_state_file_and_the_units_keep_it_in_their_state_directory():
+    from canest.cli import build_parser
+    args = build_parser().parse_args(["run", "--state-file", "/var/lib/canest/calibration.json"])
+    assert args.state_file == "/var/lib/canest/calibration.json"
+    units = Path(__file__).resolve().parents[1] / "tools" / "systemd"
+    for unit, directory in (("canest.service", "canest"), ("canest@.service", "canest/%i")):
+        text = (units / unit).read_text()
+        assert f"\nStateDirectory={directory}\n" in text
+        assert f"--state-file %S/{directory}/calibration.json" in text
