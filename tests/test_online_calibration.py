@@ -142,11 +142,6 @@ def test_learns_speed_scale_gyro_bias_and_lateral_offset_on_the_drive(learned):
     assert calibration.updates["kinematic"] > 200 and calibration.updates["steering"] > 200
 
 
-def test_learns_the_steering_ratio_within_ten_percent(learned):
-    value = dict(zip(NAMES, learned[0].calibration.x))
-    assert value["ratio"] == pytest.approx(WRONG.steering_ratio_scale, rel=0.10)
-
-
 def test_nothing_is_applied_before_thirty_seconds_of_evidence_then_rate_limited(learned):
     pipeline, history = learned
     calibration = pipeline.calibration
@@ -310,7 +305,7 @@ def test_config_rejects_bad_calibration_keys_naming_file_line_and_key(tmp_path, 
         load_config(write_config(tmp_path, estimator))
 
 
-# -- command line and service -------------------------------------------------------------------------------------------
+# -- command line and service -----------------------------------------------------------------------------------------
 
 def test_replay_state_file_option_learns_and_saves(drive, tmp_path):
     from canest.cli import main
@@ -333,3 +328,26 @@ def test_run_takes_a_state_file_and_the_units_keep_it_in_their_state_directory()
         text = (units / unit).read_text()
         assert f"\nStateDirectory={directory}\n" in text
         assert f"--state-file %S/{directory}/calibration.json" in text
+
+
+def synthetic_drive(calibration, vehicle, start, seconds, ay_error=0.0):
+    """Gentle bends both ways at 15-25 m/s on a flat road from ``start`` s, the sensors exact but ay (``ay_error``)."""
+    for k in range(int(round(seconds / 0.01))):
+        t = start + k * 0.01
+        v = 20.0 + 5.0 * math.sin(2.0 * math.pi * t / 45.0)
+        r = 0.1 * math.sin(2.0 * math.pi * t / 30.0)
+        swa = identities.steady_steering_wheel_angle(v, r, v * r, 0.0, vehicle.steering_ratio, vehicle.wheelbase,
+                                                     vehicle.understeer_gradient)
+        ax = 5.0 * 2.0 * math.pi / 45.0 * math.cos(2.0 * math.pi * t / 45.0)  # dv/dt
+        calibration.correct(sample(t, swa, r, v * r + ay_error, ax, v / vehicle.wheel_radius))
+
+
+def test_one_maneuver_of_wrong_ay_barely_moves_a_learned_offset(config):
+    calibration = OnlineCalibration(config.vehicle, NAMES_IN, 0.01)
+    synthetic_drive(calibration, config.vehicle, 0.0, 120.0)
+    ay_bias = NAMES.index("ay_bias")
+    before = calibration.x[ay_bias]
+    assert abs(before) < 0.01 and calibration.converged[ay_bias]
+    synthetic_drive(calibration, config.vehicle, 120.0, 5.0, ay_error=0.25)  # a maneuver's worth, not a bias
+    moved = calibration.x[ay_bias] - before
+    assert 0.0 < moved < 0.1, moved  # measured 0.086: the offset and the gyro bias share what v barely tells apart

@@ -71,8 +71,7 @@ def _checked(document, specs) -> dict:
     parameters = {}
     for spec in specs:
         entry = saved.get(spec.name)
-        if not isinstance(entry, dict) or any(not isinstance(entry.get(f), (int, float)) or isinstance(entry.get(f), bool)
-                                              or not math.isfinite(entry[f]) for f in FIELDS):
+        if not isinstance(entry, dict) or not all(_finite_number(entry.get(f)) for f in FIELDS):
             raise ValueError(f"parameter '{spec.name}' lacks a finite {', '.join(FIELDS)}")
         for f in ("value", "applied"):
             if not spec.low <= entry[f] <= spec.high:
@@ -81,3 +80,7 @@ def _checked(document, specs) -> dict:
             raise ValueError(f"{spec.name}: variance must be above 0 and evidence at least 0")
         parameters[spec.name] = {f: float(entry[f]) for f in FIELDS}
     return parameters
+
+
+def _finite_number(value) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)

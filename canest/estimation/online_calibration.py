@@ -3,8 +3,10 @@
 In the spirit of openpilot's ``paramsd`` (steer ratio, stiffness factor, angle
 offset and roll learned by a small Kalman filter, bounded, saved): a Kalman
 filter over the parameters below, each a random walk of small process noise
-(``drift``: it may wander that much in an hour, so one maneuver never moves
-it), updated at ``BLOCK`` s from the *raw* inputs' block means (10 ticks
+(``drift``: it may wander that much in an hour), the measurement noise per
+block widened for the errors' correlation in time: after two minutes of
+bends, 5 s of a 0.25 m/s^2 ay error move the learned ay offset by 0.09, a
+third of it, tested), updated at ``BLOCK`` s from the *raw* inputs' block means (10 ticks
 averaged: their noise shrinks, and the learner costs a few microseconds a
 tick). Each update is one identity of :mod:`canest.models.identities`, used
 only when the drive excites it and the car is steady enough for it to hold:
@@ -79,13 +81,13 @@ def parameters(vehicle: VehicleParams) -> tuple:
     """The learned parameters; the understeer gradient starts at the config's."""
     deg = math.radians(1.0)
     return (
-        Learned("speed", 1.0, 0.03, 0.8, 1.25, 0.01, 0.005, 0.002),
-        Learned("gyro_bias", 0.0, 0.5 * deg, -5.0 * deg, 5.0 * deg, 0.2 * deg, 0.15 * deg, 0.02 * deg),
-        Learned("ay_bias", 0.0, 0.3, -2.0, 2.0, 0.5, 0.05, 0.02),
-        Learned("steering_offset", 0.0, 2.0 * deg, -30.0 * deg, 30.0 * deg, 1.0 * deg, 0.2 * deg, 0.2 * deg),
-        Learned("ratio", 1.0, 0.1, 0.5, 2.0, 0.02, 0.03, 0.005),
-        Learned("understeer", vehicle.understeer_gradient, 0.003, -0.01, 0.02, 0.001, 0.0005, 0.0),
-        Learned("ax_bias", 0.0, 0.3, -2.0, 2.0, 0.5, 0.03, 0.02),
+        Learned("speed", 1.0, 0.03, 0.8, 1.25, 0.001, 0.005, 0.002),
+        Learned("gyro_bias", 0.0, 0.5 * deg, -5.0 * deg, 5.0 * deg, 0.01 * deg, 0.15 * deg, 0.02 * deg),
+        Learned("ay_bias", 0.0, 0.3, -2.0, 2.0, 0.01, 0.05, 0.02),
+        Learned("steering_offset", 0.0, 2.0 * deg, -30.0 * deg, 30.0 * deg, 0.05 * deg, 0.2 * deg, 0.2 * deg),
+        Learned("ratio", 1.0, 0.1, 0.5, 2.0, 0.002, 0.03, 0.005),
+        Learned("understeer", vehicle.understeer_gradient, 0.003, -0.01, 0.02, 0.0001, 0.0005, 0.0),
+        Learned("ax_bias", 0.0, 0.3, -2.0, 2.0, 0.01, 0.03, 0.02),
     )
 
 
