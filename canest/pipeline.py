@@ -17,6 +17,7 @@ from canest.codec.cycle_watch import CycleWatch
 from canest.codec.decode import InputDecoder, timeout
 from canest.codec.encode import EstimateEncoder
 from canest.estimation.catalog import make_estimator
+from canest.estimation.online_calibration import make_calibration
 from canest.resample import Resampler, TickClock
 from canest.settings import Config
 
@@ -30,6 +31,7 @@ class Pipeline:
         self.cycles = CycleWatch({fid: plan.cycle_time() for fid, plan in plans.items()},
                                  {fid: plan.message.name for fid, plan in plans.items()})
         self.estimator = make_estimator(config)
+        self.calibration = make_calibration(config, self.resampler.names)  # corrects each sample before a step
         self.encoder = EstimateEncoder(config.output_dbc, output_channel)
         self.clock = TickClock(1.0 / config.estimator.rate_hz)
         self.counts = Counter()
@@ -38,7 +40,8 @@ class Pipeline:
 
     def _ticks(self, t: float) -> list:
         jumps = self.clock.jumps
-        estimates = [self.estimator.step(self.resampler.sample(tick)) for tick in self.clock.due(t)]
+        estimates = [self.estimator.step(self.calibration.correct(self.resampler.sample(tick)))
+                     for tick in self.clock.due(t)]
         self.ticked += len(estimates)
         if self.clock.jumps != jumps:
             self.counts["time_jumps"] += 1
@@ -72,6 +75,10 @@ class Pipeline:
     def advance(self, t: float) -> list:
         """Ticks strictly before ``t`` with no new frame (idle bus)."""
         return self._ticks(t) if self.clock.t0 is not None else []
+
+    def close(self) -> None:
+        """At shutdown: the online calibration saves its state."""
+        self.calibration.close()
 
     def summary(self) -> dict:
         """Every frame accounted for: decoded, ignored by ID, rejected by cause; and timing events."""

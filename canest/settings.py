@@ -115,6 +115,8 @@ class EstimatorConfig:
     friction_excitation: float = 1500.0  # N per unit mu: |dF/dmu| at mu - 3 std that makes a wheel excited
     friction_correlation: float = 0.9  # prior correlation of the four wheels' frictions (same road)
     latency_compensation: bool = False
+    online_calibration: bool = True  # learn sensor biases and parameters while driving (estimation.online_calibration)
+    state_file: str | None = None  # where the online calibration is saved and reloaded from; None: not saved
     process_noise: dict = field(default_factory=lambda: {
         "yaw_rate": 0.05, "beta": 0.01, "vx": 0.3, "lateral_force": 3000.0, "wheel_speed": 5.0, "friction": 0.1})
     measurement_noise: dict = field(default_factory=lambda: {

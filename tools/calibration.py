@@ -3,11 +3,16 @@
 
     python tools/calibration.py                    # three 60 s country roads (seeds 3-5), banked +3, -3, 0 deg
     python tools/calibration.py --duration 30      # what tests/test_calibrate.py checks
+    python tools/calibration.py --online           # the daemon's online calibration over one 120 s road, bank 3 deg
 
 The simulated car differs from the config as issue 17 says (front stiffness x0.7, rear x1.3, steering offset
 1.5 deg, ratio +8 %, gyro bias 0.5 deg/s, ay bias 0.2 m/s^2, wheel radius +3 %); the drives are cached in
 ``--workdir``. Prints each parameter true and calibrated with the issue's bound, then the RMSE of sideslip, yaw
 rate and vx of a replay of each road with the wrong, the calibrated and the true config.
+
+``--online``: one country road (seed 3, ``--bank``) through the pipeline as the daemon runs it; each parameter's
+true, configured and learned value (std, * once converged and applied) at 30, 60 and 120 s, then the RMSE after
+60 s of a replay with the online calibration and without it (README "Online calibration").
 """
 from __future__ import annotations
 
@@ -16,6 +21,7 @@ import dataclasses
 import math
 import sys
 import tempfile
+import time
 from pathlib import Path
 
 import numpy as np
@@ -27,9 +33,11 @@ from canest.apps.drive_signals import read_drive  # noqa: E402
 from canest.apps.evaluate import read_table, score  # noqa: E402
 from canest.commands.calibrate import format_fit  # noqa: E402
 from canest.config import DEFAULT_CONFIG, load_config  # noqa: E402
+from canest.estimation.online_calibration import NAMES, parameters  # noqa: E402
 from canest.io.logfiles import open_log  # noqa: E402
 from canest.pipeline import Pipeline  # noqa: E402
-from canest.sim.mismatch import PlantMismatch, true_fit  # noqa: E402
+from canest.sim.mismatch import PlantMismatch, true_fit, true_vehicle  # noqa: E402
+from canest.sim.sensors import DEFAULT_SENSORS  # noqa: E402
 from canest.sim.simulate import simulate  # noqa: E402
 
 WRONG = PlantMismatch(0.7, 1.3, 1.08, 1.03, math.radians(1.5), math.radians(0.5), 0.2)
@@ -57,24 +65,103 @@ def drives(config, duration: float, workdir: Path) -> list:
     return paths
 
 
-def rmse(config_path, log: Path, truth: Path) -> dict:
-    pipeline = Pipeline(load_config(config_path))
-    estimates = [e for frame in open_log(log) for e in pipeline.feed(frame)]
+def rmse(config, log: Path, truth: Path, skip: float = 0.5, on_frame=None, at_end=None) -> dict:
+    """RMSE of each state of a replay of ``log`` with ``config`` (a path or a Config) over ticks after ``skip`` s;
+    ``on_frame(pipeline, t)`` after each frame, ``at_end(pipeline)`` after the last."""
+    pipeline = Pipeline(load_config(config) if isinstance(config, (str, Path)) else config)
+    estimates = []
+    for frame in open_log(log):
+        estimates += pipeline.feed(frame)
+        if on_frame is not None:
+            on_frame(pipeline, frame.timestamp)
+    if at_end is not None:
+        at_end(pipeline)
     table = {"t": np.array([e.t for e in estimates]), "valid": np.array([e.valid_flags for e in estimates])}
     for name in STATES:
         table[name] = np.array([e.values[name] for e in estimates])
-    return {s.state: s.rmse for s in score(table, read_table(truth), STATES, skip=0.5)}
+    return {s.state: s.rmse for s in score(table, read_table(truth), STATES, skip=skip)}
+
+
+def online(config, duration: float, bank_deg: float, workdir: Path) -> None:
+    """The online calibration's learned values over one road, and what it does to the estimates after 60 s."""
+    mismatch = dataclasses.replace(WRONG, bank=math.radians(bank_deg))
+    log, truth = workdir / f"online-s3-bank{bank_deg:g}-{duration:g}s.log", workdir / f"online-s3-bank{bank_deg:g}.csv"
+    if not (log.exists() and truth.exists()):
+        print(f"simulating road 3 ({duration:g} s, bank {bank_deg:+g} deg) ...", file=sys.stderr, flush=True)
+        sim = simulate(config, "country", 80.0, 0.85, duration=duration, seed=3, mismatch=mismatch)
+        sim.write_log(log)
+        sim.write_truth(truth)
+    deg = math.degrees(1.0)
+    # name -> (true, display factor, unit, bound: relative or absolute in display units)
+    rows = {"speed": (mismatch.wheel_radius_scale, 1.0, "x", None),
+            "gyro_bias": (mismatch.gyro_bias, deg, "deg/s", 0.05),
+            "ay_bias": (mismatch.ay_bias - mismatch.bank_acceleration, 1.0, "m/s^2", 0.03),
+            "steering_offset": (mismatch.steering_offset, deg, "deg", 0.2),
+            "ratio": (mismatch.steering_ratio_scale, 1.0, "x", None),
+            "understeer": (true_vehicle(config.vehicle, mismatch).understeer_gradient, 1.0, "s^2/m", None),
+            "ax_bias": (DEFAULT_SENSORS["ax"].bias, 1.0, "m/s^2", 0.03)}
+    marks, snapshots, seconds = [30.0, 60.0], {}, []
+
+    def snapshot(pipeline, t):
+        calibration = pipeline.calibration
+        if not seconds:  # the first frame: time every tick's learn + correct from now on
+            seconds.append(0.0)
+            correct = calibration.correct
+
+            def timed(sample):
+                started = time.thread_time()
+                corrected = correct(sample)
+                seconds.append(time.thread_time() - started)
+                return corrected
+            calibration.correct = timed
+        if marks and t - pipeline.clock.t0 >= marks[0]:
+            snapshots[marks.pop(0)] = calibration.report()
+
+    learning = rmse(config, log, truth, skip=60.0, on_frame=snapshot, at_end=lambda p: snapshots.setdefault(
+        duration, p.calibration.report()))
+    fixed = rmse(dataclasses.replace(config, estimator=dataclasses.replace(config.estimator, online_calibration=False)),
+                 log, truth, skip=60.0)
+    start = dict(zip(NAMES, (p.start for p in parameters(config.vehicle))))
+    print(f"online calibration, road 3, bank {bank_deg:+g} deg (ay_bias is the bias less g sin(bank): one sum)")
+    print(f"{'parameter':<16} {'unit':<6} {'true':>9} {'config':>9} " +
+          " ".join(f"{f'at {m:g} s':>20}" for m in snapshots) + "   error at 60 s (bound)")
+    for name, (true, factor, unit, bound) in rows.items():
+        cells = []
+        for report in snapshots.values():
+            flag = "*" if report[f"calib_{name}_converged"] else " "
+            value, std = report[f"calib_{name}"] * factor, report[f"calib_{name}_std"] * factor
+            cells.append(f"{value:>11.4f}±{std:<7.4f}{flag}")
+        at60 = snapshots.get(60.0)
+        error = ""
+        if at60 is not None:
+            got = at60[f"calib_{name}"]
+            error = (f"{100 * (got / true - 1):+.1f} % (10 %)" if bound is None else
+                     f"{(got - true) * factor:+.3f} ({bound} {unit})")
+        print(f"{name:<16} {unit:<6} {true * factor:>9.4f} {start[name] * factor:>9.4f} " + " ".join(cells) + "  "
+              + error)
+    print("* converged: applied to the estimator's inputs (rate-limited)")
+    print(f"cost: {1e6 * np.mean(seconds[1:]):.1f} us per tick on average, {1e6 * np.percentile(seconds[1:], 99):.1f} "
+          f"us at the 99th percentile, CPU time of this thread ({len(seconds) - 1} ticks)")
+    print(f"\nRMSE after 60 s {'':<14}" + " ".join(f"{s:>9}" for s in STATES) + "   (deg, deg/s, m/s)")
+    for label, scores in (("online calibration", learning), ("without", fixed)):
+        print(f"{label:<30}" + " ".join(f"{scores[s]:>9.4f}" for s in STATES))
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--config", default=str(DEFAULT_CONFIG))
-    parser.add_argument("--duration", type=float, default=60.0, help="seconds per road (default 60)")
+    parser.add_argument("--duration", type=float, help="seconds per road (default 60; --online 120)")
     parser.add_argument("--workdir", default=str(Path(tempfile.gettempdir()) / "canest-calibration"))
+    parser.add_argument("--online", action="store_true", help="the online calibration over one road instead")
+    parser.add_argument("--bank", type=float, default=3.0, help="with --online: the road's bank, deg (default 3)")
     args = parser.parse_args()
     config = load_config(args.config)
     workdir = Path(args.workdir)
     workdir.mkdir(parents=True, exist_ok=True)
+    if args.online:
+        online(config, args.duration or 120.0, args.bank, workdir)
+        return
+    args.duration = args.duration or 60.0
     paths = drives(config, args.duration, workdir)
     logs = [log for log, _ in paths]
     fit = calibrate(config.vehicle, [read_drive(config, log) for log in logs])

@@ -73,6 +73,7 @@ def replay(config: Config, log_path, out_log=None, out_csv=None, progress: bool 
     finally:
         frames.close()
         source.stop()
+        pipeline.close()  # the online calibration saved
     for warning in source.warnings():
         LOG.warning(warning)
     return {"frames": 0, **pipeline.summary(), **source.summary(), **({"stopped": 1} if stopped else {})}

@@ -131,6 +131,7 @@ class Service:
                 if estimates or msg is None:  # at most once a tick or an idle wait, not once a frame
                     self._housekeeping(clock)
         finally:
+            self.pipeline.close()  # the online calibration saved
             self._close()
             self.notifier.notify(STOPPING=1)
         return self.summary()
@@ -183,6 +184,7 @@ class Service:
         buses_changed = (config.input_bus, config.output_bus) != (self.config.input_bus, self.config.output_bus)
         self.earlier.update({k: v for k, v in self.pipeline.summary().items() if isinstance(v, int)})
         self.config = config
+        self.pipeline.close()  # saved, so the new pipeline's calibration starts from what this one learned
         self.pipeline = Pipeline(config, output_channel=config.output_bus.channel)
         if buses_changed:
             self._close()

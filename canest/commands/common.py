@@ -13,6 +13,7 @@ A bus setting comes from, lowest first (each source overrides the ones before):
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import sys
 
 FORMATTER = argparse.RawDescriptionHelpFormatter
@@ -68,6 +69,12 @@ def add_config(parser, short_option: bool = True) -> None:
                              "the 1845 kg distributed-drive EV)")
     if short_option:
         parser.add_argument("-c", action=LegacyConfig, dest="config", help=argparse.SUPPRESS)
+
+
+def add_state_file(parser) -> None:
+    parser.add_argument("--state-file", metavar="PATH",
+                        help="the online calibration's state: reloaded at start, saved every minute and at the end "
+                             "(overrides estimator.state_file; README \"Online calibration\")")
 
 
 def add_log_reading(parser) -> None:
@@ -151,6 +158,9 @@ def config_from_args(args):
     from canest.io.bus import python_can_config
 
     config = load_config(args.config or DEFAULT_CONFIG)
+    if getattr(args, "state_file", None):
+        config = dataclasses.replace(config, estimator=dataclasses.replace(config.estimator,
+                                                                           state_file=args.state_file))
     if not hasattr(args, "interface"):
         return config  # a command without a bus
     python_can = python_can_config()

@@ -13,7 +13,8 @@ from canest.config import DEFAULT_CONFIG
 from canest.errors import UsageError
 from canest.io.bus import open_bus
 from canest.io.outputs import check_outputs, is_stdio
-from canest.commands.common import FORMATTER, add_bus_overrides, add_config, add_log_reading, config_from_args, log_reading
+from canest.commands.common import (FORMATTER, add_bus_overrides, add_config, add_log_reading, add_state_file,
+                                    config_from_args, log_reading)
 from canest.pipeline import format_summary
 from canest.apps.replay import play, replay
 
@@ -70,6 +71,7 @@ def register(subparsers) -> None:
                                "another suffix or none: the format its first lines show); - for standard input")
     add_config(p, short_option=False)
     add_log_reading(p)
+    add_state_file(p)
     p.add_argument("--out", "-o", help="write the estimate frames to this log (format by suffix; - for candump text "
                                        "on standard output)")
     p.add_argument("--csv", help="write one row per tick to this CSV (- for standard output)")

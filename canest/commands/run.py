@@ -5,7 +5,7 @@ import sys
 from contextlib import ExitStack
 
 from canest.apps import journal
-from canest.commands.common import FORMATTER, add_bus_overrides, add_config, config_from_args
+from canest.commands.common import FORMATTER, add_bus_overrides, add_config, add_state_file, config_from_args
 from canest.io.sinks import CsvSink
 from canest.pipeline import format_summary
 from canest.apps.service import Service
@@ -34,6 +34,7 @@ def register(subparsers) -> None:
     add_config(p, short_option=False)
     add_bus_overrides(p)
     p.add_argument("--csv", help="also write one row per tick to this CSV")
+    add_state_file(p)
     p.add_argument("--log-level", default="INFO", choices=["DEBUG", "INFO", "WARNING", "ERROR"],
                    help="log level on stderr (default INFO)")
     p.set_defaults(func=run)

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from pathlib import Path
 
 import numpy as np
 
@@ -27,9 +28,9 @@ def read_estimator(doc: Document) -> EstimatorConfig:
         doc.reject_unknown(key_path + (name,), given, keys)
         values[name] = {**getattr(defaults, name), **{k: doc.number(key_path + (name,), given, k, limits.NOISE)
                                                        for k in given}}
-    compensation = section.get("latency_compensation", defaults.latency_compensation)
-    if not isinstance(compensation, bool):
-        raise doc.error(key_path + ("latency_compensation",), f"must be true or false, got {compensation!r}")
+    compensation = _flag(doc, section, "latency_compensation", defaults.latency_compensation)
+    online_calibration = _flag(doc, section, "online_calibration", defaults.online_calibration)
+    state_file = _state_file(doc, section)
 
     name = doc.text(key_path, section, "filter", defaults.filter)
     if name not in FILTERS:
@@ -52,9 +53,31 @@ def read_estimator(doc: Document) -> EstimatorConfig:
         if isinstance(value, float) and not math.isfinite(value):
             raise doc.error(key_path + ("filter_options", key), f"must be a finite number, got {value}")
     config = EstimatorConfig(filter=name, model=model, factorization=factorization, filter_options=options,
-                             latency_compensation=compensation, **values)
+                             latency_compensation=compensation, online_calibration=online_calibration,
+                             state_file=state_file, **values)
     _check_filter_options(doc, config)
     return config
+
+
+def _flag(doc: Document, section: dict, key: str, default: bool) -> bool:
+    value = section.get(key, default)
+    if not isinstance(value, bool):
+        raise doc.error(("estimator", key), f"must be true or false, got {value!r}")
+    return value
+
+
+def _state_file(doc: Document, section: dict) -> str | None:
+    """``estimator.state_file``: the online calibration's state, relative to the config's directory; not a directory."""
+    given = doc.text(("estimator",), section, "state_file")
+    if given is None:
+        return None
+    if not given.strip():
+        raise doc.error(("estimator", "state_file"), "must name a file, got an empty text")
+    path = Path(doc.path).parent / Path(given).expanduser()
+    if path.is_dir():
+        raise doc.error(("estimator", "state_file"), f"{path} is a directory; name a file in it, e.g. "
+                                                     f"{path / 'calibration.json'}")
+    return str(path)
 
 
 def _check_filter_options(doc: Document, est: EstimatorConfig) -> None:

@@ -1,0 +1,86 @@
+"""The online calibration's state file: saved atomically, reloaded with its variances widened, never trusted blindly.
+
+JSON, one object per learned parameter (value, variance, evidence seconds,
+applied value) under ``parameters``, with a ``version``. :meth:`CalibrationStore.save`
+writes a temporary file in the same directory, flushes it to disk and renames it
+over the old one, so a crash or power loss leaves the old state or the new one,
+never half of either. :meth:`CalibrationStore.load` multiplies every variance by
+``RELOAD_INFLATION`` (the car may have changed while off: tires, load, a
+steering alignment); a file that cannot be read, is not the format, or holds a
+value outside its parameter's bounds is ignored with one warning naming the
+file, and learning starts afresh.
+"""
+from __future__ import annotations
+
+import json
+import logging
+import math
+import os
+import tempfile
+from pathlib import Path
+
+log = logging.getLogger("canest.calibration")
+
+VERSION = 1
+RELOAD_INFLATION = 1.5
+SAVE_INTERVAL = 60.0  # s of driving between saves
+FIELDS = ("value", "variance", "evidence", "applied")
+
+
+class CalibrationStore:
+    def __init__(self, path, interval: float = SAVE_INTERVAL):
+        self.path = Path(path)
+        self.interval = interval
+
+    def save(self, parameters: dict) -> None:
+        """Write ``parameters`` (name -> FIELDS) atomically: temporary file, fsync, rename."""
+        text = json.dumps({"version": VERSION, "parameters": parameters}, indent=1, sort_keys=True)
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        handle, temporary = tempfile.mkstemp(prefix=f".{self.path.name}.", suffix=".tmp", dir=self.path.parent)
+        try:
+            with os.fdopen(handle, "w") as stream:
+                stream.write(text)
+                stream.flush()
+                os.fsync(stream.fileno())
+            os.replace(temporary, self.path)
+        except BaseException:
+            Path(temporary).unlink(missing_ok=True)
+            raise
+
+    def load(self, specs) -> dict | None:
+        """The saved parameters with variances times ``RELOAD_INFLATION``, or None (no file; or unusable: warned)."""
+        if not self.path.exists():
+            return None
+        try:
+            parameters = _checked(json.loads(self.path.read_text()), specs)
+        except (OSError, UnicodeDecodeError, ValueError) as exc:
+            log.warning("ignoring the calibration state file %s: %s; learning from scratch", self.path, exc)
+            return None
+        for entry in parameters.values():
+            entry["variance"] *= RELOAD_INFLATION
+        return parameters
+
+
+def _checked(document, specs) -> dict:
+    """The parameters of a state document, every one present, finite and within its bounds; else ValueError."""
+    if not isinstance(document, dict) or document.get("version") != VERSION:
+        raise ValueError(f"not a version {VERSION} calibration state")
+    saved = document.get("parameters")
+    if not isinstance(saved, dict):
+        raise ValueError("no 'parameters' object")
+    parameters = {}
+    for spec in specs:
+        entry = saved.get(spec.name)
+        if not isinstance(entry, dict) or not all(_finite_number(entry.get(f)) for f in FIELDS):
+            raise ValueError(f"parameter '{spec.name}' lacks a finite {', '.join(FIELDS)}")
+        for f in ("value", "applied"):
+            if not spec.low <= entry[f] <= spec.high:
+                raise ValueError(f"{spec.name} {f} {entry[f]:g} is outside its bounds [{spec.low:g}, {spec.high:g}]")
+        if entry["variance"] <= 0.0 or entry["evidence"] < 0.0:
+            raise ValueError(f"{spec.name}: variance must be above 0 and evidence at least 0")
+        parameters[spec.name] = {f: float(entry[f]) for f in FIELDS}
+    return parameters
+
+
+def _finite_number(value) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)

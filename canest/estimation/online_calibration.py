@@ -1,0 +1,334 @@
+"""Online self-calibration: the car's parameters and sensor biases learned while it drives, slowly and bounded.
+
+In the spirit of openpilot's ``paramsd`` (steer ratio, stiffness factor, angle
+offset and roll learned by a small Kalman filter, bounded, saved): a Kalman
+filter over the parameters below, each a random walk of small process noise
+(``drift``: it may wander that much in an hour), the measurement noise per
+block widened for the errors' correlation in time: after two minutes of
+bends, 5 s of a 0.25 m/s^2 ay error move the learned ay offset by 0.09, a
+third of it, tested), updated at ``BLOCK`` s from the *raw* inputs' block means (10 ticks
+averaged: their noise shrinks, and the learner costs a few microseconds a
+tick). Each update is one identity of :mod:`canest.models.identities`, used
+only when the drive excites it and the car is steady enough for it to hold:
+
+- ``kinematic`` (speed above ``MIN_SPEED``, steady yaw rate): ``ay_m = s v_w (r_m - b_r) + c``
+  observes the speed scale ``speed`` (the effective wheel radius over the configured one), the gyro bias
+  ``gyro_bias`` and the lateral offset ``ay_bias`` (the accelerometer's bias plus the mean bank's
+  ``-g sin(bank)``: no sensor here tells them apart);
+- ``steering`` (above ``MIN_STEER_SPEED``, |ay| below ``LINEAR_AY``, steady steering and yaw rate):
+  ``delta_sw = offset + k R (L r / v + K_us ay)`` observes ``steering_offset``, ``ratio`` (``k``, a
+  factor on the configured ratio ``R``) and ``understeer`` (``K_us``, the stiffnesses' balance);
+- ``longitudinal`` (moving, |ay| small): ``ax_m = s dv_w/dt + b_ax`` observes ``ax_bias`` (bias plus the
+  mean grade's ``g sin(grade)``);
+- ``standstill`` (wheels still): ``r_m = b_r``.
+
+A scalar update whose innovation exceeds ``GATE`` standard deviations is left
+out (a transient or a pothole, not evidence). Each parameter's mean is held in
+its physical bounds. A parameter counts as *converged* once its standard
+deviation is below ``converged`` and ``MIN_EVIDENCE`` s of blocks excited it;
+only then does the *applied* value (what corrects the inputs the estimator
+sees) move toward it, by at most ``rate`` per second. The correction acts on
+the inputs, so every model gains from it: wheel speeds times ``speed``, yaw
+rate less ``gyro_bias``, ay less ``ay_bias``, ax less ``ax_bias``, steering
+angle ``(swa - offset) / ratio``. ``understeer`` is learned and reported but
+not applied: it fixes only the balance of the two cornering stiffnesses.
+"""
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from canest.estimation.inputs import WHEEL_SPEEDS
+from canest.models import identities
+from canest.estimation.calibration_state import CalibrationStore
+from canest.params import VehicleParams
+from canest.settings import Config
+
+BLOCK = 0.1  # s: one learner update per block of ticks (10 Hz)
+HISTORY = 4  # blocks kept for the rates (0.4 s)
+MIN_SPEED = 5.0  # m/s
+MIN_STEER_SPEED = 8.0  # m/s: slower, the slip angles leave the linear single-track model
+LINEAR_AY = 2.5  # m/s^2
+MAX_YAW_ACCELERATION = 0.05  # rad/s^2 over the history: steady
+MAX_STEERING_RATE = math.radians(5.0)  # rad/s at the steering wheel over the history: steady
+MAX_AX = 2.0  # m/s^2: harder braking slips the wheels and pitches the body
+STANDSTILL = 0.05  # m/s
+GATE = 4.0  # innovation standard deviations
+MIN_EVIDENCE = 30.0  # s of excited blocks before a parameter is applied
+NOISE = {"kinematic": 0.1, "steering": math.radians(0.5), "longitudinal": 0.1,  # per block, widened for the
+         "standstill": math.radians(0.05)}  # errors' correlation in time and the identities' model error
+SECONDS_PER_HOUR = 3600.0
+
+
+@dataclass(frozen=True)
+class Learned:
+    """One learned parameter: start, prior std, bounds, drift (std per hour), converged std, applied rate (per s)."""
+
+    name: str
+    start: float
+    std: float
+    low: float
+    high: float
+    drift: float
+    converged: float
+    rate: float
+
+
+def parameters(vehicle: VehicleParams) -> tuple:
+    """The learned parameters; the understeer gradient starts at the config's."""
+    deg = math.radians(1.0)
+    return (
+        Learned("speed", 1.0, 0.03, 0.8, 1.25, 0.001, 0.005, 0.002),
+        Learned("gyro_bias", 0.0, 0.5 * deg, -5.0 * deg, 5.0 * deg, 0.01 * deg, 0.15 * deg, 0.02 * deg),
+        Learned("ay_bias", 0.0, 0.3, -2.0, 2.0, 0.01, 0.05, 0.02),
+        Learned("steering_offset", 0.0, 2.0 * deg, -30.0 * deg, 30.0 * deg, 0.05 * deg, 0.2 * deg, 0.2 * deg),
+        Learned("ratio", 1.0, 0.1, 0.5, 2.0, 0.002, 0.03, 0.005),
+        Learned("understeer", vehicle.understeer_gradient, 0.003, -0.01, 0.02, 0.0001, 0.0005, 0.0),
+        Learned("ax_bias", 0.0, 0.3, -2.0, 2.0, 0.01, 0.03, 0.02),
+    )
+
+
+NAMES = ("speed", "gyro_bias", "ay_bias", "steering_offset", "ratio", "understeer", "ax_bias")
+SPEED, GYRO, AY, OFFSET, RATIO, UNDERSTEER, AX = range(len(NAMES))
+APPLIED = (SPEED, GYRO, AY, OFFSET, RATIO, AX)
+NEEDED = ("yaw_rate", "ay", "steering_wheel_angle", *WHEEL_SPEEDS)
+
+
+@dataclass
+class Block:
+    """Means of the raw inputs over one block: speed from the wheels (configured radius), yaw rate, ay, ax, swa."""
+
+    wheel_speed: float
+    yaw_rate: float
+    ay: float
+    ax: float | None
+    steering_wheel_angle: float
+
+
+class BlockMeans:
+    """Sums the raw inputs tick by tick; a block with any needed input missing, stale or saturated is dropped."""
+
+    def __init__(self, names: tuple, radius: float, ticks: int):
+        index = {name: i for i, name in enumerate(names)}
+        self.wheels = [index[w] for w in WHEEL_SPEEDS]
+        self.others = [index[n] for n in ("yaw_rate", "ay", "steering_wheel_angle")]
+        self.ax = index.get("ax")
+        self.used = self.wheels + self.others + ([self.ax] if self.ax is not None else [])
+        self.radius = radius
+        self.ticks = ticks
+        self.sums = np.zeros(len(self.used))
+        self.count = 0
+        self.broken = False
+
+    def add(self, sample):
+        """Add one tick; the finished :class:`Block`, or None."""
+        used = self.used
+        if sample.stale[used].any() or sample.saturated[used].any():
+            self.broken = True
+        else:
+            self.sums += sample.values[used]
+        self.count += 1
+        if self.count < self.ticks:
+            return None
+        means, whole = self.sums / self.count, not self.broken
+        self.sums[:] = 0.0
+        self.count, self.broken = 0, False
+        if not whole:
+            return None
+        wheel_speed = self.radius * float(means[:4].mean())
+        return Block(wheel_speed, float(means[4]), float(means[5]), float(means[7]) if self.ax is not None else None,
+                     float(means[6]))
+
+
+class OnlineCalibration:
+    """The learner (module docstring): :meth:`correct` learns from a tick's raw sample and returns it corrected."""
+
+    def __init__(self, vehicle: VehicleParams, names: tuple, dt: float, store=None, enabled: bool = True):
+        self.vehicle = vehicle
+        self.specs = parameters(vehicle)
+        self.x = np.array([p.start for p in self.specs])
+        self.P = np.diag([p.std**2 for p in self.specs])
+        self.low = np.array([p.low for p in self.specs])
+        self.high = np.array([p.high for p in self.specs])
+        self.Q = np.diag([(p.drift**2) * BLOCK / SECONDS_PER_HOUR for p in self.specs])
+        self.evidence = np.zeros(len(self.specs))  # s of blocks that excited each parameter
+        self.excited = np.zeros(len(self.specs), dtype=bool)  # by an update of the current block
+        self.prior_std = np.array([p.std for p in self.specs])
+        self.applied = self.x.copy()
+        self.index = {name: i for i, name in enumerate(names)}
+        self.enabled = enabled and all(name in self.index for name in NEEDED)
+        self.blocks = BlockMeans(names, vehicle.wheel_radius, max(1, round(BLOCK / dt))) if self.enabled else None
+        self.history = deque(maxlen=HISTORY + 1)
+        self.store = store
+        self.last_save = None
+        self.updates = {"kinematic": 0, "steering": 0, "longitudinal": 0, "standstill": 0, "gated": 0}
+        if store is not None and self.enabled:
+            saved = store.load(self.specs)
+            if saved is not None:
+                self.restore(saved)
+
+    # -- learning --------------------------------------------------------------------------------------------
+
+    @property
+    def std(self) -> np.ndarray:
+        return np.sqrt(np.maximum(np.diag(self.P), 0.0))
+
+    @property
+    def converged(self) -> np.ndarray:
+        """Per parameter: std below its threshold after ``MIN_EVIDENCE`` s of excitation."""
+        return (self.std < np.array([p.converged for p in self.specs])) & (self.evidence >= MIN_EVIDENCE)
+
+    def _update(self, z: float, h: float, H: np.ndarray, noise: float, kind: str) -> None:
+        """One scalar Kalman update (Joseph form), left out beyond ``GATE``; counts the excited parameters."""
+        R = noise * noise
+        PH = self.P @ H
+        S = float(H @ PH) + R
+        innovation = z - h
+        if innovation * innovation > GATE * GATE * S:
+            self.updates["gated"] += 1
+            return
+        K = PH / S
+        self.x = np.clip(self.x + K * innovation, self.low, self.high)
+        A = np.eye(len(self.x)) - np.outer(K, H)
+        self.P = A @ self.P @ A.T + np.outer(K, K) * R
+        self.excited |= np.abs(H) * self.prior_std > 0.3 * noise
+        self.updates[kind] += 1
+
+    def _learn(self, block: Block) -> None:
+        self.P = self.P + self.Q
+        self.history.append(block)
+        if len(self.history) <= HISTORY:
+            return
+        first, span = self.history[0], HISTORY * BLOCK
+        if block.wheel_speed < STANDSTILL and first.wheel_speed < STANDSTILL:
+            H = np.zeros(len(self.x))
+            H[GYRO] = 1.0
+            self._update(block.yaw_rate, self.x[GYRO], H, NOISE["standstill"], "standstill")
+            return
+        if block.wheel_speed < MIN_SPEED:
+            return
+        speed_rate = (block.wheel_speed - first.wheel_speed) / span
+        if block.ax is not None and abs(block.ay) < 1.0 and abs(block.ax) < MAX_AX:
+            mean_ax = sum(b.ax for b in list(self.history)[1:]) / HISTORY
+            H = np.zeros(len(self.x))
+            H[SPEED], H[AX] = speed_rate, 1.0
+            self._update(mean_ax, self.x[SPEED] * speed_rate + self.x[AX], H, NOISE["longitudinal"], "longitudinal")
+        steady = (abs(block.yaw_rate - first.yaw_rate) / span < MAX_YAW_ACCELERATION and
+                  abs(block.steering_wheel_angle - first.steering_wheel_angle) / span < MAX_STEERING_RATE)
+        if not steady or abs(block.ax or 0.0) > MAX_AX:
+            return
+        s, bias = self.x[SPEED], self.x[GYRO]
+        H = np.zeros(len(self.x))
+        H[SPEED], H[GYRO], H[AY] = block.wheel_speed * (block.yaw_rate - bias), -s * block.wheel_speed, 1.0
+        h = identities.measured_ay(block.wheel_speed, block.yaw_rate, s, bias, self.x[AY])
+        self._update(block.ay, h, H, NOISE["kinematic"], "kinematic")
+        if block.wheel_speed >= MIN_STEER_SPEED and abs(block.ay) < LINEAR_AY:
+            self._steering_update(block)
+
+    def _steering_update(self, block: Block) -> None:
+        """``delta_sw = offset + k R (L r / v + K_us (ay_m - c))`` with ``r = r_m - b_r``, ``v = s v_w``.
+
+        ``ay_m - c`` is ``v r`` in steady driving: the flat road's tire force. On a banked road the tires carry
+        ``g sin(bank)`` less, so the learned offset is the offset of the *equivalent flat road*, off by
+        ``k R K_us g sin(bank)``; with it, the corrected inputs (steering, yaw rate, ay less ``c``) agree with the
+        estimator's flat-road model (which no learned value could do for the true offset and a bank it lacks).
+        Speed, gyro bias and ``c`` are taken as known here (no Jacobian entries): the kinematic identity learns them
+        exactly in any steady driving, and this one's model error (tires short of linear, transients) would
+        otherwise leak into them (a gyro bias 0.1 deg/s off on the simulator)."""
+        p = self.vehicle
+        s, bias, c, offset, k, K = (self.x[i] for i in (SPEED, GYRO, AY, OFFSET, RATIO, UNDERSTEER))
+        ratio, L, ay = p.steering_ratio, p.wheelbase, block.ay - c
+        v, r = s * block.wheel_speed, block.yaw_rate - bias
+        h = identities.steady_steering_wheel_angle(v, r, ay, offset, k * ratio, L, K)
+        H = np.zeros(len(self.x))
+        H[OFFSET] = 1.0
+        H[RATIO] = ratio * (L * r / v + K * ay)
+        H[UNDERSTEER] = k * ratio * ay
+        self._update(block.steering_wheel_angle, h, H, NOISE["steering"], "steering")
+
+    def _follow(self) -> None:
+        """Move each converged, applied parameter toward its learned value, rate-limited."""
+        converged = self.converged
+        for i in APPLIED:
+            if converged[i]:
+                step = self.specs[i].rate * BLOCK
+                self.applied[i] += min(step, max(-step, self.x[i] - self.applied[i]))
+
+    # -- the estimator's side ----------------------------------------------------------------------------------
+
+    def correct(self, sample):
+        """Learn from the raw ``sample`` (one tick), then return a copy with the applied corrections."""
+        if not self.enabled:
+            return sample
+        block = self.blocks.add(sample)
+        if block is not None:
+            self.excited[:] = False
+            self._learn(block)
+            self.evidence += BLOCK * self.excited
+            self._follow()
+            self._maybe_save(sample.t)
+        return self.apply(sample)
+
+    def apply(self, sample):
+        """A copy of ``sample`` with the applied corrections (module docstring)."""
+        a, index = self.applied, self.index
+        values = sample.values.copy()
+        for wheel in self.blocks.wheels:
+            values[wheel] *= a[SPEED]
+        values[index["yaw_rate"]] -= a[GYRO]
+        values[index["ay"]] -= a[AY]
+        if self.blocks.ax is not None:
+            values[self.blocks.ax] -= a[AX]
+        swa = index["steering_wheel_angle"]
+        values[swa] = float(identities.road_wheel_angle(values[swa], a[OFFSET], a[RATIO]))
+        return replace(sample, values=values)
+
+    def report(self) -> dict:
+        """Per parameter: ``calib_<name>`` (the learned value), ``_std``, ``_applied`` and ``_converged``."""
+        std, converged = self.std, self.converged
+        out = {}
+        for i, name in enumerate(NAMES):
+            out[f"calib_{name}"] = float(self.x[i])
+            out[f"calib_{name}_std"] = float(std[i])
+            out[f"calib_{name}_applied"] = float(self.applied[i])
+            out[f"calib_{name}_converged"] = bool(converged[i])
+        return out
+
+    # -- persistence ---------------------------------------------------------------------------------------------
+
+    def state(self) -> dict:
+        """What :class:`canest.estimation.calibration_state.CalibrationStore` saves."""
+        return {name: {"value": float(self.x[i]), "variance": float(self.P[i, i]), "evidence": float(self.evidence[i]),
+                       "applied": float(self.applied[i])} for i, name in enumerate(NAMES)}
+
+    def restore(self, saved: dict) -> None:
+        """Take a checked saved state (:meth:`CalibrationStore.load` inflated its variances)."""
+        for i, name in enumerate(NAMES):
+            entry = saved[name]
+            self.x[i], self.evidence[i], self.applied[i] = entry["value"], entry["evidence"], entry["applied"]
+        self.P = np.diag([saved[name]["variance"] for name in NAMES])
+
+    def _maybe_save(self, t: float) -> None:
+        if self.store is None:
+            return
+        if self.last_save is None:
+            self.last_save = t
+        elif t - self.last_save >= self.store.interval:
+            self.store.save(self.state())
+            self.last_save = t
+
+    def close(self) -> None:
+        """Save now (at shutdown)."""
+        if self.store is not None and self.enabled:
+            self.store.save(self.state())
+
+
+def make_calibration(config: Config, names: tuple) -> OnlineCalibration:
+    """The learner the config asks for (``estimator.online_calibration``, saving to ``estimator.state_file``);
+    a disabled one (inputs passed through) when it is off or an input it needs is not mapped."""
+    est = config.estimator
+    store = CalibrationStore(est.state_file) if est.state_file else None
+    return OnlineCalibration(config.vehicle, names, 1.0 / est.rate_hz, store, est.online_calibration)
