@@ -257,8 +257,11 @@ class Estimator:
         x = self.filter.x
         ratios = self.judge.ratios()
         index = {"yaw_rate": self.yaw, "vx": self.vx, "beta": self.beta}
-        std = self.judge.widen(np.sqrt(np.maximum(np.diag(self.filter.P), 0.0)), index, ratios, inputs.current("ay"))
         vx, beta = x[self.vx], x[self.beta]
+        reference = self.reference_speed  # vx is measured unless the reference integrated ax this tick
+        drift = self.judge.drift(inputs, vx, beta, reference.last_t != t or reference.anchored_at == t)
+        std = self.judge.widen(np.sqrt(np.maximum(np.diag(self.filter.P), 0.0)), index, ratios, inputs.current("ay"),
+                               drift)
         values = {
             "vx": vx, "vy": vx * math.tan(beta), "beta": beta, "yaw_rate": x[self.yaw],
             "vx_std": std[self.vx], "vy_std": math.hypot(vx * std[self.beta] / math.cos(beta) ** 2,
@@ -268,7 +271,7 @@ class Estimator:
         lateral = {"low_speed": mode == "low_speed", "after_reset": mode == "degraded" and t < self.suspect_until,
                    "zero_learned": self.steering_zero.learned, "lateral_ok": lateral_ok, "beta": beta, "vx": vx,
                    "delta": self._road_wheel_angle(inputs)}
-        causes = self.judge.causes(inputs, ratios, std[self.vx], lateral, t)
+        causes = self.judge.causes(inputs, ratios, std[self.vx], lateral, t, drift)
         valid = {name: causes[name] == "valid" for name in causes}
         valid["vy"] = valid["beta"] and valid["vx"]
         self._extra_values(values, valid, causes, std, inputs, lateral_ok)
