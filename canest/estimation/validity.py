@@ -83,8 +83,8 @@ import numpy as np
 
 from canest.estimation.estimate import CAUSE_GROUPS as GROUPS, CAUSES
 
-__all__ = ["CAUSES", "GROUPS", "Consistency", "Holds", "KinematicCheck", "LateralDrift", "LinearRegime", "inflation", "judge", "normalized_innovations",
-           "sideslip_model_std"]
+__all__ = ["CAUSES", "GROUPS", "Consistency", "Holds", "KinematicCheck", "LateralDrift", "LinearRegime", "inflation",
+           "judge", "normalized_innovations", "sideslip_model_std"]
 
 WINDOW = 50  # channel samples
 MIN_SAMPLES = 10  # before this many samples a channel's mean is not judged
