@@ -126,6 +126,21 @@ def test_adaptive_filters_learn_a_wrong_r(name, options):
     assert np.sqrt(np.mean(errors**2)) < 0.8 * np.sqrt(np.mean(baseline_errors**2))
 
 
+@pytest.mark.parametrize("name, options", [("lmrwekf", {}), ("svd-fckf", {"adapt_q": False})])
+def test_adaptive_filters_publish_a_covariance_with_at_least_the_configured_noise(name, options):
+    """The gain uses the learned R (25x below the configured one); the published covariance assumes the
+    configured R, the paper's P and the estimates stay as they were (cov_floor 0 publishes the paper's P)."""
+    adaptive, errors = run_scalar_random_walk(name, true_r=0.04, configured_r=1.0, window=50, **options)
+    paper, paper_errors = run_scalar_random_walk(name, true_r=0.04, configured_r=1.0, window=50, cov_floor=0.0,
+                                                 **options)
+    np.testing.assert_array_equal(errors, paper_errors)
+    assert adaptive.R_estimate[0, 0] < 0.08
+    assert adaptive.covariance[0, 0] > 3.0 * adaptive.P[0, 0]
+    assert paper.covariance[0, 0] == pytest.approx(paper.P[0, 0])
+    with pytest.raises(ValueError, match="cov_floor"):
+        FILTERS[name](np.zeros(1), np.eye(1), cov_floor=-1.0)
+
+
 def test_svd_fckf_adaptive_q_of_eq_29_is_indeterminate():
     """Q = K E K^T with E = P- + R is exactly P- - P+ for every P-: it confirms whatever P- the filter
     has, so it cannot pull a mistuned filter back. Measured on the random walk above: RMSE 0.117 with

@@ -15,7 +15,7 @@ sys.path.insert(0, str(ROOT / "tools"))
 import honesty  # noqa: E402
 
 FILTERS = ("ckf", "mcsckf", "svd-fckf", "jckf", "dici-gfckf")
-CALIBRATED = ("ckf", "mcsckf", "jckf")  # standard deviations covering the error at +-2 std
+CALIBRATED = ("ckf", "mcsckf", "svd-fckf", "jckf")  # standard deviations covering the error at +-2 std
 
 
 @pytest.fixture(scope="module")

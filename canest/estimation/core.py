@@ -226,11 +226,12 @@ class Estimator:
         self.filter.predict(self.transitions[self.low_speed], u, self.dt, self.Q)
         lateral_ok = not self.low_speed and inputs.has("steering_wheel_angle", "ay")
         channels = self._channels(inputs, t, lateral_ok)
-        self.judge.record(channels, u, self.filter.x.copy(), self.filter.P.copy(), self.stale_before)
+        self.judge.record(channels, u, self.filter.x.copy(), self.filter.covariance.copy(), self.stale_before)
         diverged = self._update(channels, inputs, u, lateral_ok, t)
         if self.step_times is not None:
             self.step_times.append(time.thread_time() - started)
-        if diverged or not (np.all(np.isfinite(self.filter.x)) and np.all(np.isfinite(self.filter.P))):
+        finite = all(np.all(np.isfinite(a)) for a in (self.filter.x, self.filter.P, self.filter.covariance))
+        if diverged or not finite:
             self.suspect_until = max(self.suspect_until, t + DIVERGENCE_HOLD)
             self.resets += 1
             self.reset()
@@ -261,8 +262,11 @@ class Estimator:
         x = self.filter.x
         ratios = self.judge.ratios()
         index = {"yaw_rate": self.yaw, "vx": self.vx, "beta": self.beta}
-        std = self.judge.widen(np.sqrt(np.maximum(np.diag(self.filter.P), 0.0)), index, ratios, inputs.current("ay"))
         vx, beta = x[self.vx], x[self.beta]
+        reference = self.reference_speed  # vx is measured unless the reference integrated ax this tick
+        drift = self.judge.drift(inputs, vx, beta, reference.last_t != t or reference.anchored_at == t)
+        std = self.judge.widen(np.sqrt(np.maximum(np.diag(self.filter.covariance), 0.0)), index, ratios,
+                               inputs.current("ay"), drift)
         values = {
             "vx": vx, "vy": vx * math.tan(beta), "beta": beta, "yaw_rate": x[self.yaw],
             "vx_std": std[self.vx], "vy_std": math.hypot(vx * std[self.beta] / math.cos(beta) ** 2,
@@ -272,7 +276,7 @@ class Estimator:
         lateral = {"low_speed": mode == "low_speed", "after_reset": mode == "degraded" and t < self.suspect_until,
                    "zero_learned": self.steering_zero.learned, "lateral_ok": lateral_ok, "beta": beta, "vx": vx,
                    "delta": self._road_wheel_angle(inputs)}
-        causes = self.judge.causes(inputs, ratios, std[self.vx], lateral, t)
+        causes = self.judge.causes(inputs, ratios, std[self.vx], lateral, t, drift)
         valid = {name: causes[name] == "valid" for name in causes}
         valid["vy"] = valid["beta"] and valid["vx"]
         self._extra_values(values, valid, causes, std, inputs, lateral_ok)

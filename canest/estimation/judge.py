@@ -31,6 +31,8 @@ class StateJudge:
         # a model that estimates friction covers saturation itself; the others are judged by the linear regime
         self.regime = None if getattr(model, "parameters", 0) else validity.LinearRegime(vehicle, dt)
         self.kinematic = validity.KinematicCheck(dt)
+        self.lateral_drift = validity.LateralDrift(dt)
+        self.sideslip_known = False  # the sideslip was valid on the last tick
         self.gyros = [n for n in validity.OBSERVED_BY["yaw_rate"] if n in model.measurement_names]  # the measured ones
         self.linear_tires = getattr(model, "linear_tires", False)
         self.sources = [SOURCES.get(name, (name,))[0] for name in model.measurement_names]  # input behind each channel
@@ -38,6 +40,7 @@ class StateJudge:
     def reset(self) -> None:
         self.consistency.reset()
         self.kinematic.reset()
+        self.lateral_drift.restart_model()
         if self.regime is not None:
             self.regime.reset()
 
@@ -68,29 +71,44 @@ class StateJudge:
     def ratios(self) -> dict:
         return {state: self.consistency.ratio(state) for state in validity.OBSERVED_BY}
 
-    def widen(self, std: np.ndarray, index: dict, ratios: dict, ay: float) -> np.ndarray:
-        """The published std: each state's by its channels' consistency, sideslip with its model error."""
+    def drift(self, inputs, vx: float, beta: float, vx_measured: bool) -> float:
+        """This tick's bound on vx's drift from an unmodelled lateral velocity (0 without ay or a gyro);
+        ``vx_measured``: the wheels measured vx this tick."""
+        if not inputs.has("ay", "yaw_rate"):
+            self.lateral_drift.reset()
+            return 0.0
+        return self.lateral_drift.update(inputs.values["ay"], inputs.values["yaw_rate"], vx, beta, vx_measured,
+                                         self.sideslip_known)
+
+    def widen(self, std: np.ndarray, index: dict, ratios: dict, ay: float, drift: float = 0.0) -> np.ndarray:
+        """The published std: each state's by its channels' consistency, vx with its lateral drift, sideslip with
+        its model error."""
         std = std.copy()
         std[index["yaw_rate"]] *= validity.inflation(ratios["yaw_rate"])
-        std[index["vx"]] *= validity.inflation(ratios["vx"])
+        std[index["vx"]] = math.hypot(std[index["vx"]] * validity.inflation(ratios["vx"]), drift)
         std[index["beta"]] = math.hypot(std[index["beta"]] * validity.inflation(ratios["beta"]),
                                         validity.sideslip_model_std(self.vehicle, ay, self.linear_tires))
         return std
 
-    def causes(self, inputs, ratios: dict, vx_std: float, lateral: dict, t: float) -> dict:
-        """Cause per state (held for ``validity.HOLD``); ``lateral`` describes the sideslip's situation."""
+    def causes(self, inputs, ratios: dict, vx_std: float, lateral: dict, t: float, drift: float = 0.0) -> dict:
+        """Cause per state (held for ``validity.HOLD``); ``lateral`` describes the sideslip's situation, ``drift``
+        is :meth:`drift`."""
         causes = {
             "yaw_rate": validity.judge(any(inputs.has(n) for n in self.gyros), inputs.saturated("yaw_rate"),
                                        ratios["yaw_rate"]),
-            "vx": self._vx_cause(inputs, ratios["vx"], vx_std),
+            "vx": self._vx_cause(inputs, ratios["vx"], vx_std, drift),
             "beta": self._lateral_cause(inputs, ratios["beta"], **lateral),
         }
-        return {state: self.holds.apply(state, cause, t) for state, cause in causes.items()}
+        causes = {state: self.holds.apply(state, cause, t) for state, cause in causes.items()}
+        self.sideslip_known = causes["beta"] == "valid"
+        return causes
 
     @staticmethod
-    def _vx_cause(inputs, ratio: float, vx_std: float) -> str:
+    def _vx_cause(inputs, ratio: float, vx_std: float, drift: float) -> str:
         cause = validity.judge(inputs.has(*WHEEL_SPEEDS) or inputs.has("ax"),
                                any(inputs.saturated(w) for w in WHEEL_SPEEDS), ratio)
+        if cause == "valid" and drift > validity.DRIFT_LIMIT:
+            return "model_regime"
         if cause == "valid" and vx_std > validity.VX_VALID_STD:
             return "uncertain"
         return cause

@@ -54,6 +54,17 @@ only, no model; biases drift it by ~0.1 deg/s, so a short window), within
 A car sliding into a slow spin on low friction keeps small innovations while
 the model's sideslip stays near zero; the kinematic sideslip sees the slide.
 
+vx, integrated from ax while the wheels do not roll freely
+(``dvx/dt = ax + r vy``), drifts by ``r`` times the lateral velocity the
+model does not see: on the simulator's DLC on friction 0.35 the car slides
+to 20-80 deg of sideslip while the model's stays near 0, and the reference
+speed's integrated ``ax`` drove vx 2-4 m/s above the truth with std 0.07
+(47 % of that drive's vx ticks valid but wrong). :class:`LateralDrift` bounds that drift from the
+kinematic lateral velocity (``dvy/dt = ay - r vx``, gyro and accelerometer,
+no model) since the sideslip was last valid, integrated since the wheels last
+measured vx: the vx std grows by it (in quadrature) and above ``DRIFT_LIMIT``
+vx is ``model_regime`` (the car slides).
+
 A state stays invalid for ``HOLD`` s after a test last failed
 (:class:`Holds`): the innovations of a model out of its regime come in
 bursts, and a bit that flickers back between them is not a promise. (An
@@ -72,8 +83,8 @@ import numpy as np
 
 from canest.estimation.estimate import CAUSE_GROUPS as GROUPS, CAUSES
 
-__all__ = ["CAUSES", "GROUPS", "Consistency", "Holds", "KinematicCheck", "LinearRegime", "inflation", "judge", "normalized_innovations",
-           "sideslip_model_std"]
+__all__ = ["CAUSES", "GROUPS", "Consistency", "Holds", "KinematicCheck", "LateralDrift", "LinearRegime", "inflation",
+           "judge", "normalized_innovations", "sideslip_model_std"]
 
 WINDOW = 50  # channel samples
 MIN_SAMPLES = 10  # before this many samples a channel's mean is not judged
@@ -88,6 +99,7 @@ REGIME_LAG = 0.15  # s, first-order lag of the steady-state yaw rate (a passenge
 REGIME_TOLERANCE = (0.035, 0.2)  # rad/s plus a share of the reference: ESC's yaw-rate deviation band
 KINEMATIC_WINDOW = 0.5  # s
 KINEMATIC_TOLERANCE = (math.radians(0.5), 0.25)  # rad plus a share of the kinematic change
+DRIFT_LIMIT = 0.5  # m/s of possible vx drift above which the car slides (vx "model_regime"; as VX_VALID_STD)
 # The channels that observe each published state (any model; a model without the channel just lacks it).
 OBSERVED_BY = {
     "yaw_rate": ("yaw_rate", "yaw_rate_2"),
@@ -214,3 +226,43 @@ class KinematicCheck:
         change = kinematic_now - kinematic_then
         absolute, relative = KINEMATIC_TOLERANCE
         return abs((beta_now - beta_then) - change) <= absolute + relative * abs(change)
+
+
+class LateralDrift:
+    """The vx error (m/s) an unmodelled lateral velocity can have caused since the wheels last measured vx.
+
+    ``vx`` follows ``dvx/dt = ax + r vy``; with the model's ``vy = vx tan(beta)`` wrong by ``e`` the error
+    grows at ``r e``. ``e`` is the kinematic lateral velocity's change, ``integral(ay - r vx)``, less the
+    model's, since the model's sideslip was last known (valid); the drift is ``|integral(r e)|`` since the
+    wheels last measured vx (``vx_measured``: the reference speed rolled freely). A filter restart
+    (:meth:`restart_model`) moves the model's sideslip, not the car's: ``e`` goes on from the restarted model.
+    """
+
+    def __init__(self, dt: float):
+        self.dt = dt
+        self.reset()
+
+    def reset(self) -> None:
+        self.kinematic = 0.0
+        self.known = None  # (kinematic, model) lateral velocity when the sideslip was last known
+        self.model = None  # the model's lateral velocity at the last update
+        self.restarted = False
+        self.drift = 0.0
+
+    def restart_model(self) -> None:
+        """The filter restarts: its next lateral velocity continues the mismatch ``e``."""
+        self.restarted = self.known is not None
+
+    def update(self, ay: float, yaw_rate: float, vx: float, beta: float, vx_measured: bool,
+               sideslip_known: bool) -> float:
+        self.kinematic += (ay - yaw_rate * vx) * self.dt
+        model = vx * math.tan(beta)
+        if self.restarted:
+            self.known = (self.known[0], self.known[1] + model - self.model)
+            self.restarted = False
+        if sideslip_known or self.known is None:
+            self.known = (self.kinematic, model)
+        self.model = model
+        mismatch = (self.kinematic - self.known[0]) - (model - self.known[1])
+        self.drift = 0.0 if vx_measured else self.drift + yaw_rate * mismatch * self.dt
+        return abs(self.drift)

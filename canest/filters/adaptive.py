@@ -40,6 +40,22 @@ part is capped per diagonal at ``q_ceiling`` times the configured Q (by a
 congruence ``D Q_a D``, so it stays positive semidefinite). ``nis`` is the
 innovation's NIS under the configured R, so the divergence test sees what
 the configured noise explains, not what the adaptation absorbed.
+
+The published covariance assumes at least the configured noise. The papers'
+recursion (gain, noise estimates, their ``H P- H^T``) runs on ``P`` as
+printed; :class:`PublishedCovariance` carries a second covariance through
+the same steps: the same prediction (sigma points or Jacobian) with the
+same Q, and the Joseph form of the same gain,
+``(I - K H) P- (I - K H)^T + K R_c K^T`` with ``R_c = max(R^, cov_floor R)``
+per channel (``cov_floor`` 1 by default): the covariance of that gain under
+at least the configured noise, symmetric positive definite by construction.
+The estimator publishes and judges with it (``covariance``). With the
+estimated R alone (down to ``r_floor`` 0.01 of the configured one) both
+filters published yaw-rate and vx standard deviations 2-4 fold below their
+error on the simulator's grid (yaw rate within 2 std on 37-39 % of valid
+ticks, NEES 25). Feeding the floored covariance back into the recursion
+instead corrupts the noise estimate (its ``H P- H^T`` grows, the estimated R
+falls to its floor): a second covariance keeps the papers' filter intact.
 """
 from __future__ import annotations
 
@@ -47,7 +63,7 @@ from collections import deque
 
 import numpy as np
 
-from canest.filters.base import Measurement, Transition
+from canest.filters.base import Measurement, Transition, symmetrize
 from canest.filters.ekf import ExtendedKalmanFilter
 from canest.filters.sigma import FifthDegreeCubatureKalmanFilter
 
@@ -97,17 +113,51 @@ class ChannelWindows:
         return np.diag(out)
 
 
+class PublishedCovariance:
+    """A second covariance, ``covariance``, through the filter's own steps with at least the configured noise.
+
+    Mixed into a filter whose ``predict`` depends only on ``x``, ``P``, the inputs and Q: the prediction runs
+    once more from ``covariance`` and keeps only its spread; :meth:`publish_update` applies the gain ``K``
+    the filter just used."""
+
+    def __init__(self, x0, P0, cov_floor: float = 1.0, **options):
+        super().__init__(x0, P0, **options)
+        if not cov_floor >= 0.0:
+            raise ValueError(f"cov_floor must be at least 0 (1: the configured R), got {cov_floor}")
+        self.cov_floor = cov_floor
+        self.published = self.P.copy()
+
+    @property
+    def covariance(self) -> np.ndarray:
+        return self.published
+
+    def predict(self, transition: Transition, u, dt: float, Q: np.ndarray) -> None:
+        x = self.x
+        super().predict(transition, u, dt, Q)
+        x_next, P_next = self.x, self.P
+        self.x, self.P = x, self.published
+        super().predict(transition, u, dt, Q)
+        self.published = self.P
+        self.x, self.P = x_next, P_next
+
+    def publish_update(self, H: np.ndarray, R_estimate: np.ndarray, R: np.ndarray) -> None:
+        """Joseph form of the last gain on ``covariance`` under ``max(R_estimate, cov_floor R)``."""
+        A = np.eye(self.x.size) - self.K @ H
+        noise = np.maximum(R_estimate, self.cov_floor * R)
+        self.published = symmetrize(A @ self.published @ A.T + self.K @ noise @ self.K.T)
+
+
 def nominal_nis(y: np.ndarray, spread: np.ndarray, R: np.ndarray) -> float:
     """NIS of innovation ``y`` under the configured ``R`` (``spread``: the predicted measurement covariance)."""
     return float(y @ np.linalg.solve(spread + R, y))
 
 
-class LimitedMemoryRandomWeightedEKF(ExtendedKalmanFilter):
+class LimitedMemoryRandomWeightedEKF(PublishedCovariance, ExtendedKalmanFilter):
     name = "lmrwekf"
 
     def __init__(self, x0, P0, factorization: str = "cholesky", window: int = 30, forgetting: float = 0.97,
-                 r_floor: float = 0.01, r_ceiling: float = 10.0):
-        super().__init__(x0, P0)
+                 r_floor: float = 0.01, r_ceiling: float = 10.0, cov_floor: float = 1.0):
+        super().__init__(x0, P0, cov_floor=cov_floor)
         self.r_ceiling = r_ceiling
         if not 0.95 <= forgetting <= 0.995:
             raise ValueError(f"forgetting must be in [0.95, 0.995] (LMRWEKF paper step 7), got {forgetting}")
@@ -125,15 +175,17 @@ class LimitedMemoryRandomWeightedEKF(ExtendedKalmanFilter):
         self.R_estimate = self.windows.noise(measurement.channels, R, predicted, centred=True, bias=(n - 1) / n,
                                              floor=self.r_floor, ceiling=self.r_ceiling)
         super().update(z, measurement, u, self.R_estimate)
+        self.publish_update(H, self.R_estimate, R)
         self.nis = nominal_nis(y, spread, R)
 
 
-class AdaptiveSvdFifthDegreeCKF(FifthDegreeCubatureKalmanFilter):
+class AdaptiveSvdFifthDegreeCKF(PublishedCovariance, FifthDegreeCubatureKalmanFilter):
     name = "svd-fckf"
 
     def __init__(self, x0, P0, factorization: str = "svd", window: int = 30, r_floor: float = 0.01,
-                 r_ceiling: float = 10.0, q_floor: float = 1.0, q_ceiling: float = 100.0, adapt_q: bool = True):
-        super().__init__(x0, P0, factorization=factorization)
+                 r_ceiling: float = 10.0, q_floor: float = 1.0, q_ceiling: float = 100.0, adapt_q: bool = True,
+                 cov_floor: float = 1.0):
+        super().__init__(x0, P0, cov_floor=cov_floor, factorization=factorization)
         self.windows = ChannelWindows(window)
         self.r_floor = r_floor
         self.r_ceiling = r_ceiling
@@ -155,7 +207,9 @@ class AdaptiveSvdFifthDegreeCKF(FifthDegreeCubatureKalmanFilter):
         self.windows.push(measurement.channels, y, predicted)
         self.R_estimate = self.windows.noise(measurement.channels, R, predicted, centred=False, bias=1.0,
                                              floor=self.r_floor, ceiling=self.r_ceiling)
+        H = np.linalg.solve(self.P, Pxz).T  # statistical linearization at the prior, as correct() uses
         self.correct(y, Pzz, Pxz, self.R_estimate)
+        self.publish_update(H, self.R_estimate, R)
         self.nis = nominal_nis(y, Pzz, R)
         moments = [self.windows.second_moment(c, centred=False) for c in measurement.channels]
         if self.adapt_q and all(m is not None for m in moments):

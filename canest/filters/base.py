@@ -76,6 +76,11 @@ class GaussianFilter:
         self.y = self.S = self.K = None
         self.nis = 0.0
 
+    @property
+    def covariance(self) -> np.ndarray:
+        """The covariance the estimator publishes and judges with (P; an adaptive filter keeps its own)."""
+        return self.P
+
     def repair(self, P: np.ndarray) -> np.ndarray:
         """Nearest symmetric matrix with eigenvalues >= EIGEN_FLOOR * max(1, largest); counted."""
         self.repairs += 1
