@@ -17,7 +17,8 @@ import pytest
 from canest.config import load_config
 from canest.errors import ConfigError
 from canest.estimation.calibration_state import RELOAD_INFLATION, CalibrationStore
-from canest.estimation.online_calibration import NAMES, OnlineCalibration, parameters
+from canest.estimation.learned_parameters import NAMES, parameters
+from canest.estimation.online_calibration import OnlineCalibration
 from canest.models import identities
 from canest.pipeline import Pipeline
 from canest.resample import Sample

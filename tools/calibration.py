@@ -33,7 +33,7 @@ from canest.apps.drive_signals import read_drive  # noqa: E402
 from canest.apps.evaluate import read_table, score  # noqa: E402
 from canest.commands.calibrate import format_fit  # noqa: E402
 from canest.config import DEFAULT_CONFIG, load_config  # noqa: E402
-from canest.estimation.online_calibration import NAMES, parameters  # noqa: E402
+from canest.estimation.learned_parameters import NAMES, parameters  # noqa: E402
 from canest.io.logfiles import open_log  # noqa: E402
 from canest.pipeline import Pipeline  # noqa: E402
 from canest.sim.mismatch import PlantMismatch, true_fit, true_vehicle  # noqa: E402

@@ -37,13 +37,16 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from dataclasses import dataclass, replace
+from dataclasses import replace
 
 import numpy as np
 
-from canest.estimation.inputs import WHEEL_SPEEDS
-from canest.models import identities
+from canest.estimation.calibration_blocks import Block, BlockMeans
 from canest.estimation.calibration_state import CalibrationStore
+from canest.estimation.inputs import WHEEL_SPEEDS
+from canest.estimation.learned_parameters import (APPLIED, AX, AY, GYRO, NAMES, OFFSET, RATIO, SPEED, UNDERSTEER,
+                                                  parameters)
+from canest.models import identities
 from canest.params import VehicleParams
 from canest.settings import Config
 
@@ -61,86 +64,7 @@ MIN_EVIDENCE = 30.0  # s of excited blocks before a parameter is applied
 NOISE = {"kinematic": 0.1, "steering": math.radians(0.5), "longitudinal": 0.1,  # per block, widened for the
          "standstill": math.radians(0.05)}  # errors' correlation in time and the identities' model error
 SECONDS_PER_HOUR = 3600.0
-
-
-@dataclass(frozen=True)
-class Learned:
-    """One learned parameter: start, prior std, bounds, drift (std per hour), converged std, applied rate (per s)."""
-
-    name: str
-    start: float
-    std: float
-    low: float
-    high: float
-    drift: float
-    converged: float
-    rate: float
-
-
-def parameters(vehicle: VehicleParams) -> tuple:
-    """The learned parameters; the understeer gradient starts at the config's."""
-    deg = math.radians(1.0)
-    return (
-        Learned("speed", 1.0, 0.03, 0.8, 1.25, 0.001, 0.005, 0.002),
-        Learned("gyro_bias", 0.0, 0.5 * deg, -5.0 * deg, 5.0 * deg, 0.01 * deg, 0.15 * deg, 0.02 * deg),
-        Learned("ay_bias", 0.0, 0.3, -2.0, 2.0, 0.01, 0.05, 0.02),
-        Learned("steering_offset", 0.0, 2.0 * deg, -30.0 * deg, 30.0 * deg, 0.05 * deg, 0.2 * deg, 0.2 * deg),
-        Learned("ratio", 1.0, 0.1, 0.5, 2.0, 0.002, 0.03, 0.005),
-        Learned("understeer", vehicle.understeer_gradient, 0.003, -0.01, 0.02, 0.0001, 0.0005, 0.0),
-        Learned("ax_bias", 0.0, 0.3, -2.0, 2.0, 0.01, 0.03, 0.02),
-    )
-
-
-NAMES = ("speed", "gyro_bias", "ay_bias", "steering_offset", "ratio", "understeer", "ax_bias")
-SPEED, GYRO, AY, OFFSET, RATIO, UNDERSTEER, AX = range(len(NAMES))
-APPLIED = (SPEED, GYRO, AY, OFFSET, RATIO, AX)
 NEEDED = ("yaw_rate", "ay", "steering_wheel_angle", *WHEEL_SPEEDS)
-
-
-@dataclass
-class Block:
-    """Means of the raw inputs over one block: speed from the wheels (configured radius), yaw rate, ay, ax, swa."""
-
-    wheel_speed: float
-    yaw_rate: float
-    ay: float
-    ax: float | None
-    steering_wheel_angle: float
-
-
-class BlockMeans:
-    """Sums the raw inputs tick by tick; a block with any needed input missing, stale or saturated is dropped."""
-
-    def __init__(self, names: tuple, radius: float, ticks: int):
-        index = {name: i for i, name in enumerate(names)}
-        self.wheels = [index[w] for w in WHEEL_SPEEDS]
-        self.others = [index[n] for n in ("yaw_rate", "ay", "steering_wheel_angle")]
-        self.ax = index.get("ax")
-        self.used = self.wheels + self.others + ([self.ax] if self.ax is not None else [])
-        self.radius = radius
-        self.ticks = ticks
-        self.sums = np.zeros(len(self.used))
-        self.count = 0
-        self.broken = False
-
-    def add(self, sample):
-        """Add one tick; the finished :class:`Block`, or None."""
-        used = self.used
-        if sample.stale[used].any() or sample.saturated[used].any():
-            self.broken = True
-        else:
-            self.sums += sample.values[used]
-        self.count += 1
-        if self.count < self.ticks:
-            return None
-        means, whole = self.sums / self.count, not self.broken
-        self.sums[:] = 0.0
-        self.count, self.broken = 0, False
-        if not whole:
-            return None
-        wheel_speed = self.radius * float(means[:4].mean())
-        return Block(wheel_speed, float(means[4]), float(means[5]), float(means[7]) if self.ax is not None else None,
-                     float(means[6]))
 
 
 class OnlineCalibration:
