@@ -45,7 +45,7 @@ def ford_dbc() -> Path:
 
 def ford_config(folder, edit=None) -> Path:
     """The Ford config written into ``folder`` with its DBC found by :func:`realdata` (the config's own relative
-    path holds only in /work/main) and ``edit`` applied to its dict."""
+    path holds only in a checkout that sits beside shared/) and ``edit`` applied to its dict."""
     data = yaml.safe_load(FORD_CONFIG.read_text())
     data["input"]["dbc"] = str(ford_dbc())
     if edit is not None:

@@ -18,8 +18,7 @@ import sys
 import numpy as np
 
 from canest.cli import COMMANDS, DESCRIPTION, build_parser
-from tests.conftest import ROOT
-from tests.test_init import FORD_DBC
+from tests.conftest import ROOT, ford_dbc
 
 ELSEWHERE = {
     "canest demo": "tests/test_service_virtual.py::test_demo_runs_and_reports_accuracy",
@@ -72,7 +71,7 @@ def folder_as_the_examples_assume(where):
     os.symlink(ROOT / "configs", where / "configs")
     shutil.copy(ROOT / "configs" / "dici_ev.yaml", where / "my_car.yaml")
     (where / "my_car.yaml").write_text((where / "my_car.yaml").read_text().replace("../dbc/", f"{ROOT}/dbc/"))
-    shutil.copy(FORD_DBC, where / FORD_DBC.name)
+    shutil.copy(ford_dbc(), where / ford_dbc().name)
     for index, mu in enumerate(("0.85", "0.7", "0.6"), start=1):
         run(f"canest simulate -m dlc --speed 70 --mu {mu} --seed {index} -o drive{index}.log --truth drive{index}.csv")
     run("canest simulate -m dlc --seed 5 -o drive.blf --truth drive.blf.truth.csv")
