@@ -13,8 +13,7 @@ from collections import Counter
 
 import can
 
-from canest.codec.cycle_watch import CycleWatch
-from canest.codec.decode import InputDecoder, timeout
+from canest.codec.decode import InputDecoder
 from canest.codec.encode import EstimateEncoder
 from canest.estimation.catalog import make_estimator
 from canest.estimation.online_calibration import make_calibration
@@ -27,9 +26,6 @@ class Pipeline:
         self.config = config
         self.decoder = InputDecoder(config)
         self.resampler = Resampler(config.signals, self.decoder.timeouts(config.estimator.timeout_cycles))
-        plans = self.decoder.plans
-        self.cycles = CycleWatch({fid: plan.cycle_time() for fid, plan in plans.items()},
-                                 {fid: plan.message.name for fid, plan in plans.items()})
         self.estimator = make_estimator(config)
         self.calibration = make_calibration(config, self.resampler.names)  # corrects each sample before a step
         self.encoder = EstimateEncoder(config.output_dbc, output_channel)
@@ -66,11 +62,9 @@ class Pipeline:
         return estimates
 
     def _watch_cycle(self, frame_id: int, t: float) -> None:
-        """Measure the message's cycle; where only the default was assumed, its inputs' timeouts follow it."""
-        measured = self.cycles.observe(frame_id, t)
-        if measured is not None:
-            for spec in self.decoder.plans[frame_id].specs:
-                self.resampler.set_timeout(spec.canonical, timeout(measured, self.config.estimator.timeout_cycles))
+        """Where only the default cycle was assumed, the inputs' timeouts follow the measured one."""
+        for name, seconds in self.decoder.measured_timeouts(frame_id, t, self.config.estimator.timeout_cycles).items():
+            self.resampler.set_timeout(name, seconds)
 
     def advance(self, t: float) -> list:
         """Ticks strictly before ``t`` with no new frame (idle bus)."""

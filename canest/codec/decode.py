@@ -14,6 +14,7 @@ from collections import Counter
 import can
 
 from canest.codec.checksums import make_checksum
+from canest.codec.cycle_watch import CycleWatch
 from canest.codec.dbc import load_database
 from canest.codec.plausibility import SlewLimit
 from canest.codec.sample_checks import MOVING_WHEEL_SPEED, SignalBounds, StuckDetector
@@ -92,6 +93,8 @@ class InputDecoder:
         self.wheel_speeds = {}  # canonical -> latest decoded value: whether the car moves
         self.counts = Counter()
         self.last_saturated = frozenset()  # canonical inputs of the last decoded frame that sat at a limit of its range
+        self.cycles = CycleWatch({fid: plan.cycle_time() for fid, plan in self.plans.items()},
+                                 {fid: plan.message.name for fid, plan in self.plans.items()})
 
     @property
     def moving(self) -> bool:
@@ -106,6 +109,14 @@ class InputDecoder:
     def timeouts(self, timeout_cycles: float) -> dict:
         """Per canonical input: ``timeout_cycles`` times its message's cycle time (at least ``MIN_TIMEOUT``)."""
         return {name: timeout(self.cycle_time(name), timeout_cycles) for name in self.frame_of}
+
+    def measured_timeouts(self, frame_id: int, t: float, timeout_cycles: float) -> dict:
+        """Note the time of a decoded frame of ``frame_id``; once a message whose cycle was only the default has
+        been measured (:class:`~canest.codec.cycle_watch.CycleWatch`), its inputs' new timeouts, else ``{}``."""
+        measured = self.cycles.observe(frame_id, t)
+        if measured is None:
+            return {}
+        return {spec.canonical: timeout(measured, timeout_cycles) for spec in self.plans[frame_id].specs}
 
     @property
     def frame_ids(self):
