@@ -188,6 +188,18 @@ def test_an_empty_log_gives_a_csv_header_a_warning_and_exit_0(tmp_path):
     assert (tmp_path / "est.csv").read_text().startswith("t,vx,vy,beta,yaw_rate,")
 
 
+def test_a_log_none_of_whose_frames_decode_exits_65_naming_the_causes_with_its_outputs_written(tmp_path):
+    """A car's log read through the wrong DBC: every frame read, none an input. The outputs and the summary are
+    written (every tick no_input), and the exit status says the run estimated nothing."""
+    lines = [f"({i * 0.01:.6f}) can0 7F0#0102030405060708" for i in range(300)]
+    (tmp_path / "other_car.log").write_text("\n".join(lines) + "\n")
+    result = canest("replay", tmp_path / "other_car.log", "--csv", tmp_path / "est.csv", "-q")
+    one_line_error(result, 65, "other_car.log", "none of its 300 frames decoded", "ignored_id=300")
+    assert result.stdout.strip() == "frames=300 ignored_id=300"
+    modes = read_table(tmp_path / "est.csv")["mode"]
+    assert len(modes) > 250 and set(modes) == {"no_input"}
+
+
 def test_missing_optional_packages_exit_69_naming_the_remedy(drive, tmp_path):
     one_line_error(canest_blocking("asammdf", "replay", drive[0], "--out", tmp_path / "est.mf4", "-q"), 69,
                    f"{tmp_path / 'est.mf4'}: The asammdf package was not found", "[mf4]")

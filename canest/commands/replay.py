@@ -10,7 +10,7 @@ import sys
 from contextlib import contextmanager
 
 from canest.config import DEFAULT_CONFIG
-from canest.errors import UsageError
+from canest.errors import LogError, UsageError
 from canest.io.bus import open_bus
 from canest.io.outputs import check_outputs, is_stdio
 from canest.commands.common import (FORMATTER, add_bus_overrides, add_config, add_log_reading, add_state_file,
@@ -51,7 +51,10 @@ Damaged logs: a line python-can cannot parse is skipped and counted
 in ASC), a truncated or corrupt BLF is read up to the damage (log_truncated,
 log_corrupt, log_unread_bytes); a warning on stderr gives the first line
 numbers. A log of which nothing can be read is an error (exit 65); an empty
-log gives outputs without ticks (the CSV has its header) and a warning.
+log gives outputs without ticks (the CSV has its header) and a warning. A log
+whose frames were read but none decoded into an input (all of other IDs, or
+all rejected: CAN FD flags, checksums, ranges) writes its outputs and the
+summary, then exits 65 naming the causes.
 
 Outputs are written to a hidden temporary file beside them and renamed when
 the replay ends well: a failed run leaves no partial file. An existing output
@@ -167,4 +170,17 @@ def run(args) -> int:
     if stop.is_set():
         print(f"canest: replay stopped by {stop.signal} after {summary.get('frames', 0)} frames; the outputs are "
               "complete up to the last tick", file=sys.stderr)
+    else:
+        nothing_decoded(args.log, summary)
     return 0
+
+
+def nothing_decoded(log, summary: dict) -> None:
+    """A LogError (exit 65) when frames were read and none decoded into an input: every tick was ``no_input``."""
+    if summary.get("frames", 0) and not summary.get("decoded", 0):
+        causes = sorted(((n, k) for k, n in summary.items() if k.startswith(("rejected_", "ignored_")) and n),
+                        reverse=True)
+        named = ", ".join(f"{k}={n}" for n, k in causes[:3]) or "no cause counted"
+        raise LogError(f"{log}: none of its {summary['frames']} frames decoded into an input ({named}); "
+                       "the outputs hold only no_input ticks: compare the log's IDs and CAN FD flags with the "
+                       "config's input DBC (canest check --config ...)")
