@@ -1,10 +1,11 @@
 """Fleet replay planning on real files, without a cluster: which logs, where their results go, which truth."""
 import os
+import shutil
 from pathlib import Path
 
 import pytest
 
-from canest.apps.batch_plan import file_fingerprint, find_logs, input_root, plan, truth_for
+from canest.apps.batch_plan import CODE, file_fingerprint, find_logs, fingerprint, input_root, plan, truth_for
 from canest.errors import UsageError
 
 
@@ -89,3 +90,17 @@ def test_fingerprint_sees_a_touch(tmp_path):
     stat = os.stat(log)
     os.utime(log, ns=(stat.st_atime_ns, stat.st_mtime_ns + 1_000_000_000))
     assert file_fingerprint(log)["mtime_ns"] != before["mtime_ns"]
+
+
+def test_the_config_fingerprint_covers_canests_code(config, tmp_path):
+    """A result computed by another canest build is not current: editing any module of the package changes the
+    fingerprint; a file that is not code (a cache) does not."""
+    code = tmp_path / "canest"
+    shutil.copytree(CODE, code, ignore=shutil.ignore_patterns("__pycache__"))
+    before = fingerprint(config, code)
+    assert fingerprint(config) == fingerprint(config, CODE) and before == fingerprint(config, code)
+    (code / "notes.pyc").write_bytes(b"not code")
+    assert fingerprint(config, code) == before
+    filters = code / "filters" / "sigma.py"
+    filters.write_text(filters.read_text() + "\n# another build\n")
+    assert fingerprint(config, code) != before

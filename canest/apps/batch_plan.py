@@ -4,7 +4,8 @@ A task's results live under ``OUT/<log path relative to the input root>/<filter>
 (the input root being the folder the glob patterns start in, before their first
 wildcard; the log's suffix kept, so ``day1/a.log`` and ``day1/a.blf`` are two
 results). A result is complete and current when its summary records the
-fingerprints of the config (values and DBCs) and of the inputs (log and truth
+fingerprints of the config (values and DBCs, and the canest code that
+computed it: a result of another build is redone) and of the inputs (log and truth
 file: size, modification time, hash of the first and last 64 KiB) that a rerun
 computes again, and the CSV has the size the summary says: :func:`complete`.
 """
@@ -29,6 +30,8 @@ FLEET_SUMMARY = "fleet_summary.csv"
 TRUTH_SUFFIXES = (".truth.csv", "_truth.csv")
 SAMPLE_BYTES = 64 * 1024  # hashed at the head and at the tail of every input file
 WILDCARDS = "*?["
+CODE = Path(__file__).resolve().parents[1]  # the canest package
+CODE_SUFFIXES = (".py", ".dbc", ".yaml")
 
 
 def input_root(patterns) -> Path:
@@ -74,11 +77,16 @@ def truth_for(log: Path):
     return None
 
 
-def fingerprint(config: Config) -> str:
-    """Changes whenever anything that shapes the estimates changes (config values and DBC contents)."""
+def fingerprint(config: Config, code: Path = CODE) -> str:
+    """Changes whenever anything that shapes the estimates changes: config values, DBC contents and the code of
+    canest (every file of the package below ``code``: a result of an older estimator, or with other columns, is
+    redone)."""
     digest = hashlib.sha256(repr(dataclasses.astuple(config)).encode())
     for path in (config.input_dbc, config.output_dbc):
         digest.update(Path(path).read_bytes())
+    for path in sorted(code.rglob("*")):
+        if path.is_file() and path.suffix in CODE_SUFFIXES:
+            digest.update(str(path.relative_to(code)).encode() + b"\0" + path.read_bytes())
     return digest.hexdigest()[:16]
 
 
