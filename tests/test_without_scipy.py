@@ -80,10 +80,11 @@ def test_the_command_line_starts(tmp_path, option):
     assert "canest" in result.stdout and result.stderr == ""
 
 
-def test_calibrate_names_the_extra_in_one_line(tmp_path, config):
+@pytest.mark.parametrize("log", ["drive.log", "not_recorded_yet.log"])
+def test_calibrate_names_the_extra_in_one_line_before_reading_a_log(tmp_path, config, log):
     from canest.sim.simulate import simulate
     simulate(config, "sine", 60.0, 0.85, duration=5.0, seed=5).write_log(tmp_path / "drive.log")
-    result = run(tmp_path, "-m", "canest", "calibrate", tmp_path / "drive.log", "--config", CONFIG)
+    result = run(tmp_path, "-m", "canest", "calibrate", tmp_path / log, "--config", CONFIG)
     assert result.returncode == DependencyError.exit_status
     assert result.stderr.count("\n") == 1 and result.stderr.startswith("canest: error: canest calibrate needs")
     assert INSTALL in result.stderr

@@ -166,9 +166,14 @@ def _widening(errors: np.ndarray) -> float:
     return math.sqrt((1.0 + rho) / (1.0 - rho))
 
 
+def optimizer():
+    """scipy.optimize, or a DependencyError naming the extra that installs it (scipy is not a core dependency)."""
+    return DependencyError.require("scipy.optimize", "canest calibrate", "pip install 'canest[calibrate]'")
+
+
 def calibrate(vehicle: VehicleParams, drives: list, progress=None) -> Fit:
     """Fit the parameters (module docstring) to ``drives``; ``progress(evaluations)`` after each evaluation."""
-    optimize = DependencyError.require("scipy.optimize", "canest calibrate", "pip install 'canest[calibrate]'")
+    optimize = optimizer()
     model = SingleTrackFit(vehicle, drives)
     x0 = np.array([p.start for p in model.parameters])
     bounds = (np.array([p.low for p in model.parameters]), np.array([p.high for p in model.parameters]))

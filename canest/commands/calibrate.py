@@ -7,7 +7,7 @@ from pathlib import Path
 
 from tqdm import tqdm
 
-from canest.apps.calibrate import calibrate
+from canest.apps.calibrate import calibrate, optimizer
 from canest.calibration import SHARED
 from canest.apps.calibrated_config import bank_lines, check_new, write_calibrated
 from canest.apps.drive_signals import check_signals, read_drive
@@ -82,6 +82,7 @@ def format_fit(config, fit, logs: list) -> list:
 
 
 def run(args) -> int:
+    optimizer()  # missing scipy is said before the logs are read, not after
     warnings_to_stderr()  # a damaged log's warnings as replay gives them
     args.logs = expand_logs(args.logs)
     config = config_from_args(args)
