@@ -1,6 +1,7 @@
 """The online calibration reaches the outputs: CSV columns, the CE_Calibration message, ``check`` and ``monitor``.
 
-The drive: 40 s of simulated country road (the learner moves every parameter off its start within it).
+The drive: test_online_calibration's 45 s of simulated country road by a wrong car (the learner moves every
+parameter off its start within it).
 """
 import csv
 import dataclasses
@@ -15,26 +16,15 @@ from canest.apps.monitor import CALIBRATION_UNITS, CALIBRATION_WAIT, Monitor, ru
 from canest.apps.replay import replay
 from canest.cli import main
 from canest.codec.encode import CALIBRATION_MESSAGE, EstimateEncoder, calibration_signal
-from canest.config import load_config
 from canest.errors import DbcError
 from canest.estimation.estimate import Estimate
 from canest.estimation.learned_parameters import NAMES, parameters
 from canest.pipeline import Pipeline
-from canest.sim.simulate import simulate
 from tests.conftest import CONFIG
+from tests.test_online_calibration import config, drive  # noqa: F401  (fixtures: the wrong car's 45 s drive)
 from tests.test_output_dbc_contract import REFERENCE, edited_dbc, without_message, without_signal
 
 CALIBRATION_ID = 1297
-
-
-@pytest.fixture(scope="module")
-def config():
-    return load_config(CONFIG)
-
-
-@pytest.fixture(scope="module")
-def drive(config):
-    return simulate(config, "country", 80.0, 0.85, duration=40.0, seed=3)
 
 
 @pytest.fixture(scope="module")
