@@ -78,6 +78,17 @@ def test_without_the_learner_the_csv_has_no_calibration_columns(config, drive, t
     assert "vx" in header and not any(column.startswith("calib_") for column in header)
 
 
+def test_a_live_csv_takes_the_calibration_columns_from_the_first_estimate(estimates, tmp_path):
+    """``canest run --csv`` gives no states: the first estimate makes the header, calibration included."""
+    from canest.io.sinks import CsvSink
+    ticks, _ = estimates
+    with CsvSink(tmp_path / "live.csv") as sink:
+        sink.publish(ticks[-2:])
+    rows = read_csv(tmp_path / "live.csv")
+    assert list(rows[0])[-len(NAMES) * 2:] == calibration_columns()
+    assert float(rows[1]["calib_ratio_std"]) == pytest.approx(ticks[-1].calibration["calib_ratio_std"], rel=1e-8)
+
+
 # -- CE_Calibration ----------------------------------------------------------------------------------------------------
 
 def tick(t, calibration):
