@@ -143,7 +143,7 @@ class Monitor:
                          f"  {valid}")
         rows = list(self.calibration_rows())
         if rows:
-            lines.append(f"{'learned':<16} {'value':>10} {'std':>20}  state")
+            lines.append(f"{'learned':<16} {'value':>10} {'std':>19}  state")
             lines += [f"{name:<16} {value:>10.5f} {unit:<11}{std:>8.5f}  {state}"
                       for name, value, std, unit, state in rows]
         return "\n".join(lines)
