@@ -36,13 +36,19 @@ class Pipeline:
 
     def _ticks(self, t: float) -> list:
         jumps = self.clock.jumps
-        estimates = [self.estimator.step(self.calibration.correct(self.resampler.sample(tick)))
-                     for tick in self.clock.due(t)]
+        estimates = [self._step(tick) for tick in self.clock.due(t)]
         self.ticked += len(estimates)
         if self.clock.jumps != jumps:
             self.counts["time_jumps"] += 1
             self.estimator.reset()
         return estimates
+
+    def _step(self, tick: float):
+        """One tick's estimate, carrying the online calibration's report when the learner runs."""
+        estimate = self.estimator.step(self.calibration.correct(self.resampler.sample(tick)))
+        if self.calibration.enabled:
+            estimate.calibration = self.calibration.report()
+        return estimate
 
     def feed(self, msg: can.Message) -> list:
         t = msg.timestamp

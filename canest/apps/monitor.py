@@ -2,8 +2,9 @@
 
 Like ``cantools monitor`` but for canest's contract: the latest value,
 standard deviation and validity of each estimate, the status message (filter,
-mode, missing inputs, resets, NIS), and the health of the output stream
-itself (frame rate, CRC failures, counter gaps).
+mode, missing inputs, resets, NIS), the online calibration (each learned
+parameter's value, std and state) and the health of the output stream itself
+(frame rate, CRC failures, counter gaps).
 """
 from __future__ import annotations
 
@@ -14,7 +15,9 @@ from collections import Counter
 import can
 
 from canest.codec import integrity
-from canest.codec.encode import OUTPUT_MESSAGES, STATUS_MESSAGE, integrity_signals
+from canest.codec.encode import (CALIBRATION_MESSAGE, CALIBRATION_PAGE, OUTPUT_MESSAGES, STATUS_MESSAGE,
+                                 calibration_signal, integrity_signals)
+from canest.estimation.learned_parameters import NAMES
 from canest.signals import INPUT_GROUPS
 
 # (label, message, signal stem, display unit, factor from SI)
@@ -27,18 +30,33 @@ ROWS = [
       for w in ("fl", "fr", "rl", "rr")],
     *[(f"mu {w}", "CE_Friction", f"Mu{w.upper()}", "", 1.0) for w in ("fl", "fr", "rl", "rr")],
 ]
+CALIBRATION_WAIT = 1.2  # s: once the estimates are complete, how long --once waits for the 1 Hz calibration
+DEG = 180 / math.pi
+# learned parameter: (display unit, factor from SI); speed and ratio are factors on the configured values
+CALIBRATION_UNITS = {"speed": ("x", 1.0), "gyro_bias": ("deg/s", DEG), "ay_bias": ("m/s^2", 1.0),
+                     "steering_offset": ("deg", DEG), "ratio": ("x", 1.0), "understeer": ("deg/(m/s^2)", DEG),
+                     "ax_bias": ("m/s^2", 1.0)}
+
+
+def calibration_state(page: dict) -> str:
+    """``converged`` (its correction applied), ``learning`` (driving excited it) or ``prior`` (not yet)."""
+    return "converged" if page["CalConverged"] else "learning" if page["CalLearned"] else "prior"
 
 
 class Monitor:
     def __init__(self, database):
         self.database = database
-        self.messages = {m.frame_id: m for m in database.messages if m.name in (*OUTPUT_MESSAGES, STATUS_MESSAGE)}
+        self.messages = {m.frame_id: m for m in database.messages
+                         if m.name in (*OUTPUT_MESSAGES, STATUS_MESSAGE, CALIBRATION_MESSAGE)}
         # per frame ID: (counter signal name, counter modulus, checksum byte), as the sender sets them
         self.integrity = {}
         for frame_id, message in self.messages.items():
             counter, checksum = integrity_signals(message)
             self.integrity[frame_id] = (counter.name, 2 ** counter.length, integrity.checksum_byte(checksum))
+        self.names = {m.name for m in self.messages.values()}
+        self.completed_at = None  # when complete() first held
         self.latest = {}
+        self.calibration = {}  # learned parameter -> its latest CE_Calibration page
         self.counts = Counter()
         self.counters = {}
         self.started = time.monotonic()
@@ -59,11 +77,33 @@ class Monitor:
         if last is not None and (counter - last) % modulus != 1:
             self.counts["counter_gaps"] += 1
         self.counters[message.name] = counter
-        self.latest[message.name] = values
+        if message.name == CALIBRATION_MESSAGE:
+            self.calibration[str(values[CALIBRATION_PAGE])] = values
+        else:
+            self.latest[message.name] = values
+
+    def calibration_rows(self):
+        """(name, value, std, unit, state) of each learned parameter received, in display units."""
+        for name in NAMES:
+            page = self.calibration.get(name)
+            if page is not None:
+                unit, factor = CALIBRATION_UNITS[name]
+                signal = calibration_signal(name)
+                yield name, page[signal] * factor, page[f"{signal}Std"] * factor, unit, calibration_state(page)
 
     def complete(self) -> bool:
         """Whether the status message and the velocity and yaw-rate estimates have arrived."""
         return all(name in self.latest for name in (STATUS_MESSAGE, "CE_Velocity", "CE_YawSideslip"))
+
+    def settled(self) -> bool:
+        """Complete, and every learned parameter's page arrived or one calibration cycle waited for it (a DBC
+        without ``CE_Calibration`` or a daemon whose learner is off sends none)."""
+        if not self.complete():
+            return False
+        if self.completed_at is None:
+            self.completed_at = time.monotonic()
+        return (len(self.calibration) == len(NAMES) or CALIBRATION_MESSAGE not in self.names
+                or time.monotonic() - self.completed_at >= CALIBRATION_WAIT)
 
     def line(self) -> str:
         """The view as one line of ``key=value`` words, for a pipe or a log; an invalid state's value ends in ?."""
@@ -77,6 +117,8 @@ class Monitor:
             if values is not None:
                 mark = "" if values[f"{stem}Valid"] else "?"
                 words.append(f"{label.replace(' ', '_')}={values[stem] * factor:.4g}{mark}")
+        for name, value, std, _, state in self.calibration_rows():
+            words += [f"calib_{name}={value:.6g}", f"calib_{name}_std={std:.3g}", f"calib_{name}_state={state}"]
         return " ".join(words)
 
     def render(self, title: str) -> str:
@@ -99,13 +141,19 @@ class Monitor:
             valid = "yes" if values[f"{stem}Valid"] else "no"
             lines.append(f"{label:<10} {values[stem] * factor:>9.3f} {unit:<5}{values[stem + 'Std'] * factor:>8.3f}"
                          f"  {valid}")
+        rows = list(self.calibration_rows())
+        if rows:
+            lines.append(f"{'learned':<16} {'value':>10} {'std':>19}  state")
+            lines += [f"{name:<16} {value:>10.5f} {unit:<11}{std:>8.5f}  {state}"
+                      for name, value, std, unit, state in rows]
         return "\n".join(lines)
 
 
 def run_monitor(bus: can.BusABC, database, title: str, out, refresh: float = 0.5, duration=None, clear=False,
                 lines: bool = False, once: bool = False):
     """Print the view every ``refresh`` s until ``duration`` s have passed (or forever); ``lines``: one line each
-    time (:meth:`Monitor.line`); ``once``: print once, when the estimates are complete (or at the end)."""
+    time (:meth:`Monitor.line`); ``once``: print once, when the estimates are complete and the calibration too
+    (:meth:`Monitor.settled`)."""
     monitor = Monitor(database)
     end = math.inf if duration is None else time.monotonic() + duration
     next_draw = time.monotonic()
@@ -113,7 +161,7 @@ def run_monitor(bus: can.BusABC, database, title: str, out, refresh: float = 0.5
         msg = bus.recv(timeout=min(refresh, max(end - time.monotonic(), 0.0)))
         if msg is not None:
             monitor.receive(msg)
-        if once and not monitor.complete():
+        if once and not monitor.settled():
             continue
         if once or time.monotonic() >= next_draw:
             next_draw += refresh

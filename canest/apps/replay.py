@@ -50,7 +50,8 @@ def replay(config: Config, log_path, out_log=None, out_csv=None, progress: bool 
         with ExitStack() as stack:
             states = OUTPUT_STATES + pipeline.estimator.extra_states
             sinks = [stack.enter_context(sink) for sink in (
-                CsvSink(out_csv, states, staged=True) if out_csv else None,
+                CsvSink(out_csv, states, staged=True, calibration=pipeline.calibration.enabled)
+                if out_csv else None,
                 LogSink(out_log, pipeline.encoder, staged=True) if out_log else None,
                 CallbackSink(on_estimate) if on_estimate else None) if sink is not None]
             rows_on_screen = (is_stdio(out_csv) or is_stdio(out_log)) and sys.stdout.isatty()  # a bar would cut in

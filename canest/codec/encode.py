@@ -6,7 +6,10 @@ signal. A message is sent when the running estimator provides all its values;
 the status message is sent every tick. Each frame gets its rolling counter and
 CRC (:mod:`canest.codec.integrity`). A value that is not a number is sent as 0 with
 its validity bit cleared; a value or standard deviation beyond its signal's
-range is sent saturated.
+range is sent saturated. The online calibration (``CALIBRATION_MESSAGE``, one
+multiplexed page per learned parameter) is sent once per its cycle time when
+the learner runs and the output DBC has the message; a user's DBC without it
+still works, the calibration is then not sent.
 """
 from __future__ import annotations
 
@@ -19,6 +22,7 @@ from canest.codec.dbc import clamp_to_signal, load_database, tolerated_problems
 from canest.codec.decode import InputDecoder
 from canest.errors import DbcError
 from canest.estimation.estimate import CAN_VALID_BITS, MODES, Estimate
+from canest.estimation.learned_parameters import NAMES
 from canest.settings import Config
 from canest.signals import WHEELS
 
@@ -48,6 +52,14 @@ CAUSE_MESSAGE = "CE_ValidityCause"
 CAUSE_SIGNALS = {"VxCause": "vx", "YawRateCause": "yaw_rate", "SideslipCause": "beta", "ForcesCause": "forces",
                  "FrictionCause": "friction"}
 STATUS_SIGNALS = ("FilterId", "Mode", "ValidFlags", "MissingInputs", "ResetCount", "InnovationNis")
+CALIBRATION_MESSAGE = "CE_Calibration"
+CALIBRATION_PAGE = "CalParameter"  # the multiplexer: which learned parameter (its index in NAMES)
+
+
+def calibration_signal(name: str) -> str:
+    """The value signal of a learned parameter in ``CE_Calibration`` (``gyro_bias`` -> ``CalGyroBias``); its std is
+    the same name + ``Std``."""
+    return "Cal" + "".join(part.capitalize() for part in name.split("_"))
 
 
 def integrity_signals(message):
@@ -62,6 +74,9 @@ def contract_gaps(database, broken=None) -> list:
     which of its messages are ``broken`` ({message name: problem})."""
     required = {**{name: list(fields) for name, fields in OUTPUT_MESSAGES.items()},
                 STATUS_MESSAGE: list(STATUS_SIGNALS), CAUSE_MESSAGE: list(CAUSE_SIGNALS)}
+    if CALIBRATION_MESSAGE in {m.name for m in database.messages}:  # optional, but complete when there
+        required[CALIBRATION_MESSAGE] = [CALIBRATION_PAGE, "CalLearned", "CalConverged",
+                                         *(f"{calibration_signal(n)}{std}" for n in NAMES for std in ("", "Std"))]
     gaps = []
     for name, signals in required.items():
         try:
@@ -119,6 +134,10 @@ class EstimateEncoder:
         self.filter_ids = {str(v): k for k, v in (status["FilterId"].choices or {}).items()}
         self.mode_ids = {str(v): k for k, v in status["Mode"].choices.items()}
         self.last_causes, self.next_causes = None, -float("inf")  # CE_ValidityCause: on change, else at its cycle
+        self.has_calibration = CALIBRATION_MESSAGE in {m.name for m in self.database.messages}
+        if self.has_calibration:
+            self.senders[CALIBRATION_MESSAGE] = _Sender(self.database.get_message_by_name(CALIBRATION_MESSAGE))
+        self.next_calibration = -float("inf")
 
     def encode(self, estimate: Estimate) -> list:
         frames = []
@@ -151,6 +170,24 @@ class EstimateEncoder:
         if causes != self.last_causes or estimate.t >= self.next_causes:
             frames.append(sender.frame(dict(causes), estimate.t, self.channel))
             self.last_causes, self.next_causes = causes, estimate.t + sender.cycle_time
+        if self.has_calibration and estimate.calibration and estimate.t >= self.next_calibration:
+            frames += self._calibration_frames(estimate)
+        return frames
+
+    def _calibration_frames(self, estimate: Estimate) -> list:
+        """One ``CE_Calibration`` page per learned parameter: value, std, learned and converged flags."""
+        sender = self.senders[CALIBRATION_MESSAGE]
+        self.next_calibration = estimate.t + sender.cycle_time
+        frames = []
+        for page, name in enumerate(NAMES):
+            signal, report = calibration_signal(name), estimate.calibration
+            frames.append(sender.frame({
+                CALIBRATION_PAGE: page,
+                signal: clamp_to_signal(sender.signals[signal], report[f"calib_{name}"]),
+                f"{signal}Std": clamp_to_signal(sender.signals[f"{signal}Std"], report[f"calib_{name}_std"]),
+                "CalLearned": int(report[f"calib_{name}_learned"]),
+                "CalConverged": int(report[f"calib_{name}_converged"]),
+            }, estimate.t, self.channel))
         return frames
 
 

@@ -5,7 +5,7 @@ import json
 
 from canest.commands.common import FORMATTER, add_config, config_from_args
 from canest.codec.decode import InputDecoder
-from canest.codec.encode import EstimateEncoder
+from canest.codec.encode import CALIBRATION_MESSAGE, EstimateEncoder
 from canest.codec.raw_range import raw_range_warnings
 from canest.codec.reach import input_shortfalls, output_shortfalls
 from canest.estimation.catalog import losses
@@ -20,14 +20,17 @@ EPILOG = """examples:
 Every error names the file, the line and the key, message or signal.
 Inputs the config does not map are listed with what each costs: the models
 and filters of the catalog that need it, and the states not estimated then.
-Signals whose range stops short of what cars reach are warned about, and so
+An output DBC without CE_Calibration still works: the online calibration
+is learned and applied but not sent (one note says so). Signals whose range
+stops short of what cars reach are warned about, and so
 is each signal whose DBC range is in raw counts ([0|65535] for signed values)
 where the config gives no range.
 --json prints one object: config, vehicle, input, output, filter (name,
 model, factorization: cholesky, svd or null for the EKFs, rate_hz,
-min_speed), signals (canonical, message, signals, frame_id, cycle_time,
+min_speed, online_calibration), signals (canonical, message, signals, frame_id, cycle_time,
 cycle_time_from, timeout, unit, factor, offset, overrides), integrity,
-tolerated, missing_inputs, range_warnings, raw_range_warnings, ok.
+tolerated, missing_inputs, range_warnings, raw_range_warnings,
+calibration_sent (the output DBC carries CE_Calibration and the learner is on), ok.
 Exit status 0 when the config is usable, 2 when it is not."""
 
 
@@ -91,13 +94,14 @@ def _report(config, decoder, encoder) -> dict:
         "input": {"dbc": str(config.input_dbc), "bus": _bus(config.input_bus)},
         "output": {"dbc": str(config.output_dbc), "bus": _bus(config.output_bus)},
         "filter": {"name": e.filter, "model": e.model, "factorization": factorization_of(e.filter, e.factorization),
-                   "rate_hz": e.rate_hz, "min_speed": e.min_speed},
+                   "rate_hz": e.rate_hz, "min_speed": e.min_speed, "online_calibration": e.online_calibration},
         "signals": signals,
         "integrity": {name: _checks(c) for name, c in config.messages.items()},
         "tolerated": dict(config.tolerated),
         "missing_inputs": losses(config.signals),
         "range_warnings": input_shortfalls(config.signals) + output_shortfalls(encoder.database),
         "raw_range_warnings": raw_range_warnings(config.signals, decoder.database),
+        "calibration_sent": encoder.has_calibration and e.online_calibration,
         "ok": True,
     }
 
@@ -133,6 +137,9 @@ def _print(report: dict) -> None:
         if lines:
             print(f"\n{title}")
             print("\n".join(f"  {line}" for line in lines))
+    if not report["calibration_sent"] and report["filter"]["online_calibration"]:
+        print(f"\nnote: {report['output']['dbc']} has no {CALIBRATION_MESSAGE} message: the online calibration is "
+              "learned and applied but not sent (add the message from dbc/canest_estimates.dbc)")
     print("\nOK")
 
 

@@ -13,13 +13,16 @@ EPILOG = """examples:
   canest monitor -c vcan1 --once                        # one snapshot for a script, then exit
 
 Shows each estimate with its standard deviation and validity, the status
-message (filter, mode, missing inputs, resets, NIS), and the stream's own
-health: frame rate, CRC failures and rolling-counter gaps. On a terminal the
-view is redrawn in place; when standard output is not a terminal (a pipe, a
-file) each refresh is one line: frames=N mode=M vx=... yaw_rate=... (a state
-flagged invalid ends in '?'). --once prints one view (or line) as soon as the
-status message and the estimates have arrived, and exits; 69 when nothing
-arrived within --duration (default 5 s with --once)."""
+message (filter, mode, missing inputs, resets, NIS), the online calibration
+(one line per learned parameter: value, std, state prior/learning/converged;
+angles in deg, speed and ratio as factors) and the stream's own health: frame
+rate, CRC failures and rolling-counter gaps. On a terminal the view is redrawn
+in place; when standard output is not a terminal (a pipe, a file) each
+refresh is one line: frames=N mode=M vx=... yaw_rate=... (a state flagged
+invalid ends in '?') calib_speed=... calib_speed_std=... calib_speed_state=...
+--once prints one view (or line) as soon as the status message and the
+estimates have arrived (and the calibration, waiting at most 1.2 s for it),
+and exits; 69 when nothing arrived within --duration (default 5 s with --once)."""
 
 
 class NoEstimates(BusOpenError):

@@ -34,6 +34,7 @@ class Estimate:
     missing: tuple = ()
     resets: int = 0
     causes: dict = field(default_factory=dict)  # state or group -> why its bit is clear ("valid" when set)
+    calibration: dict = field(default_factory=dict)  # the online learner's report(), empty when it is off
 
     @property
     def valid_flags(self) -> int:

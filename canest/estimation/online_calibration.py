@@ -211,13 +211,15 @@ class OnlineCalibration:
         return replace(sample, values=values)
 
     def report(self) -> dict:
-        """Per parameter: ``calib_<name>`` (the learned value), ``_std``, ``_applied`` and ``_converged``."""
+        """Per parameter: ``calib_<name>`` (the learned value), ``_std``, ``_applied``, ``_learned`` (driving excited
+        it, or a saved state brought evidence) and ``_converged``."""
         std, converged = self.std, self.converged
         out = {}
         for i, name in enumerate(NAMES):
             out[f"calib_{name}"] = float(self.x[i])
             out[f"calib_{name}_std"] = float(std[i])
             out[f"calib_{name}_applied"] = float(self.applied[i])
+            out[f"calib_{name}_learned"] = bool(self.evidence[i] > 0.0)
             out[f"calib_{name}_converged"] = bool(converged[i])
         return out
 

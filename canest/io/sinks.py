@@ -33,6 +33,7 @@ import can
 
 from canest.errors import DependencyError, UsageError
 from canest.estimation.estimate import CAUSE_GROUPS
+from canest.estimation.learned_parameters import NAMES
 from canest.io.outputs import OutputFile
 
 
@@ -102,31 +103,36 @@ class CsvSink(FileSink):
 
     ``valid`` bits: 0 vx, 1 vy, 2 beta, 3 yaw rate, 4 lateral forces, 5 friction, 6 friction observable now,
     7-10 lateral force fl, fr, rl, rr, 11-14 friction fl, fr, rl, rr (``canest.estimation.estimate.VALID_BITS``).
-    Given ``states``, the header is written at once, so a run without a tick still leaves a CSV with its header;
-    otherwise the first estimate's states make it.
+    With the online calibration running, each row ends in ``calib_<name>`` and ``calib_<name>_std`` per learned
+    parameter (:data:`~canest.estimation.learned_parameters.NAMES`, SI units).
+    Given ``states`` (and ``calibration``: whether the learner runs), the header is written at once, so a run without
+    a tick still leaves a CSV with its header; otherwise the first estimate's states and calibration make it.
     """
 
-    def __init__(self, path, states=(), staged: bool = False):
+    def __init__(self, path, states=(), staged: bool = False, calibration: bool = False):
         super().__init__(path, staged)
         try:
             self.handle = self.output.open_text()
             self.writer = csv.writer(self.handle)
             self.columns = None
             if states:
-                self._header(list(states))
+                self._header(list(states), calibration)
         except OSError as exc:
             self.output.discard()
             raise self.output.error(exc) from None
 
-    def _header(self, states: list) -> None:
+    def _header(self, states: list, calibration: bool) -> None:
         self.columns = states + [f"{k}_std" for k in states]
-        self.writer.writerow(["t", *self.columns, "valid", "mode", *(f"why_{g}" for g in CAUSE_GROUPS)])
+        self.calibration = [f"calib_{name}{suffix}" for name in NAMES for suffix in ("", "_std")] if calibration else []
+        self.writer.writerow(["t", *self.columns, "valid", "mode", *(f"why_{g}" for g in CAUSE_GROUPS),
+                              *self.calibration])
 
     def _write(self, estimate) -> None:
         if self.columns is None:
-            self._header([k for k in estimate.values if not k.endswith("_std")])
+            self._header([k for k in estimate.values if not k.endswith("_std")], bool(estimate.calibration))
         self.writer.writerow([f"{estimate.t:.6f}", *(f"{estimate.values[c]:.9g}" for c in self.columns),
-                              estimate.valid_flags, estimate.mode, *(estimate.causes.get(g, "") for g in CAUSE_GROUPS)])
+                              estimate.valid_flags, estimate.mode, *(estimate.causes.get(g, "") for g in CAUSE_GROUPS),
+                              *(f"{estimate.calibration[c]:.9g}" for c in self.calibration)])
 
     def _release(self) -> None:
         self.handle.close()
