@@ -77,3 +77,13 @@ def test_a_lost_frame_does_not_move_the_measured_cycle():
     times = [k * CYCLE for k in range(SAMPLES + 4) if k not in (5, 6, 11)]  # three of them lost
     measured = [watch.observe(0x30, t) for t in times]
     assert [m for m in measured if m is not None] == [pytest.approx(CYCLE)]
+
+
+def test_check_says_a_default_cycle_is_measured_at_run_time(config, capsys):
+    from canest.cli import main
+    with pytest.raises(SystemExit) as done:
+        main(["check", "--config", str(config.path)])
+    assert done.value.code == 0
+    out = capsys.readouterr().out
+    assert "100ms (default)" in out
+    assert "cycle (default): the DBC gives no GenMsgCycleTime; replay and run measure the cycle" in out

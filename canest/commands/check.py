@@ -128,6 +128,9 @@ def _print(report: dict) -> None:
     checked = [f"{name} ({', '.join(checks)})" for name, checks in report["integrity"].items()]
     if checked:
         print("\nintegrity checks: " + "; ".join(checked))
+    if any(row["cycle_time_from"] == "default" for row in report["signals"]):
+        print("\ncycle (default): the DBC gives no GenMsgCycleTime; replay and run measure the cycle from the first "
+              "frames and the timeouts follow it (input.messages.<message>.cycle_time fixes it)")
     for message, problem in report["tolerated"].items():
         print(f"tolerated in the input DBC ({f'no signal is taken from {message}' if message else 'lenient load'}): "
               f"{problem}")
