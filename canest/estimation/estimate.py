@@ -4,6 +4,7 @@ Outputs, evaluation and batch read these without importing the estimator.
 """
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 
 from canest.signals import INPUT_GROUPS, WHEELS
@@ -34,7 +35,7 @@ class Estimate:
     missing: tuple = ()
     resets: int = 0
     causes: dict = field(default_factory=dict)  # state or group -> why its bit is clear ("valid" when set)
-    calibration: dict = field(default_factory=dict)  # the online learner's report(), empty when it is off
+    calibration: Mapping = field(default_factory=dict)  # the online learner's report() (read-only), empty when off
 
     @property
     def valid_flags(self) -> int:

@@ -38,6 +38,7 @@ from __future__ import annotations
 import math
 from collections import deque
 from dataclasses import replace
+from types import MappingProxyType
 
 import numpy as np
 
@@ -82,6 +83,7 @@ class OnlineCalibration:
         self.excited = np.zeros(len(self.specs), dtype=bool)  # by an update of the current block
         self.prior_std = np.array([p.std for p in self.specs])
         self.applied = self.x.copy()
+        self._report = None  # built by report() once per block
         self.index = {name: i for i, name in enumerate(names)}
         self.enabled = enabled and all(name in self.index for name in NEEDED)
         self.blocks = BlockMeans(names, vehicle.wheel_radius, max(1, round(BLOCK / dt))) if self.enabled else None
@@ -189,6 +191,7 @@ class OnlineCalibration:
             return sample
         block = self.blocks.add(sample)
         if block is not None:
+            self._report = None
             self.excited[:] = False
             self._learn(block)
             self.evidence += BLOCK * self.excited
@@ -210,9 +213,15 @@ class OnlineCalibration:
         values[swa] = float(identities.road_wheel_angle(values[swa], a[OFFSET], a[RATIO]))
         return replace(sample, values=values)
 
-    def report(self) -> dict:
+    def report(self) -> MappingProxyType:
         """Per parameter: ``calib_<name>`` (the learned value), ``_std``, ``_applied``, ``_learned`` (driving excited
-        it, or a saved state brought evidence) and ``_converged``."""
+        it, or a saved state brought evidence) and ``_converged``. Read-only and shared by the ticks of one block:
+        it changes only when a block updates the learner (10 Hz), so it is built once per block."""
+        if self._report is None:
+            self._report = MappingProxyType(self._build_report())
+        return self._report
+
+    def _build_report(self) -> dict:
         std, converged = self.std, self.converged
         out = {}
         for i, name in enumerate(NAMES):
@@ -236,6 +245,7 @@ class OnlineCalibration:
             entry = saved[name]
             self.x[i], self.evidence[i], self.applied[i] = entry["value"], entry["evidence"], entry["applied"]
         self.P = np.diag([saved[name]["variance"] for name in NAMES])
+        self._report = None
 
     def _maybe_save(self, t: float) -> None:
         if self.store is None:
