@@ -8,6 +8,7 @@ import pytest
 from canest.apps.evaluate import read_table
 from canest.apps.replay import play, replay
 from canest.errors import LogError
+from canest.estimation.learned_parameters import NAMES
 from canest.io.logfiles import open_log
 from canest.sim.simulate import simulate
 
@@ -189,9 +190,10 @@ def test_an_empty_log_gives_a_csv_with_its_header_and_a_warning(config, tmp_path
     with caplog.at_level(logging.WARNING, logger="canest"):
         summary = replay(config, log, out_csv=tmp_path / "est.csv", progress=False)
     assert summary["frames"] == 0
+    learned = [f"calib_{name}{part}" for name in NAMES for part in ("", "_std")]  # the online learner is on
     assert (tmp_path / "est.csv").read_text().splitlines() == [
         "t,vx,vy,beta,yaw_rate,vx_std,vy_std,beta_std,yaw_rate_std,valid,mode,"
-        "why_vx,why_yaw_rate,why_beta,why_forces,why_friction"]
+        "why_vx,why_yaw_rate,why_beta,why_forces,why_friction," + ",".join(learned)]
     assert "the log holds no CAN frames" in caplog.text
 
 
