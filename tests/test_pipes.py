@@ -5,6 +5,7 @@ import json
 import re
 import subprocess
 import sys
+import threading
 import time
 
 import numpy as np
@@ -79,9 +80,14 @@ def test_replay_of_a_live_pipe_writes_ticks_before_the_input_ends(files):
     first_row = replay.stdout.readline()
     assert header.startswith(b"t,vx,") and first_row[:1].isdigit()
     assert replay.poll() is None  # still waiting for more input
-    replay.stdin.write(b"".join(lines[1500:]))
-    replay.stdin.close()
+
+    def write_the_rest():  # while this thread reads: a full stdout pipe would block the writer and the replay
+        replay.stdin.write(b"".join(lines[1500:]))
+        replay.stdin.close()
+    writer = threading.Thread(target=write_the_rest)
+    writer.start()
     rest = replay.stdout.read()
+    writer.join()
     assert replay.wait(60) == 0
     assert header + first_row + rest == files["est"].read_bytes()
 
@@ -233,7 +239,6 @@ def stream(log, times: int, chunk: int = 1 << 16) -> tuple:
     """``canest replay - --csv -`` fed ``log`` ``times`` over (see :func:`repeated`) in chunks by a writer thread:
     (CSV rows, whether the first row came out while the input was still open, the process's peak resident memory
     in KiB, as last seen while it wrote rows)."""
-    import threading
 
     process = subprocess.Popen([*CANEST, "replay", "-", "--config", CONFIG, "--csv", "-"], stdin=subprocess.PIPE,
                                stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, cwd=ROOT)
