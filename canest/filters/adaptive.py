@@ -140,9 +140,10 @@ class PublishedCovariance:
         self.published = self.P
         self.x, self.P = x_next, P_next
 
-    def publish_update(self, H: np.ndarray, R_estimate: np.ndarray, R: np.ndarray) -> None:
-        """Joseph form of the last gain on ``covariance`` under ``max(R_estimate, cov_floor R)``."""
-        A = np.eye(self.x.size) - self.K @ H
+    def publish_update(self, R_estimate: np.ndarray, R: np.ndarray) -> None:
+        """Joseph form of the last gain ``K`` (with its linearization ``H``) on ``covariance`` under
+        ``max(R_estimate, cov_floor R)``."""
+        A = np.eye(self.x.size) - self.K @ self.H
         noise = np.maximum(R_estimate, self.cov_floor * R)
         self.published = symmetrize(A @ self.published @ A.T + self.K @ noise @ self.K.T)
 
@@ -175,7 +176,7 @@ class LimitedMemoryRandomWeightedEKF(PublishedCovariance, ExtendedKalmanFilter):
         self.R_estimate = self.windows.noise(measurement.channels, R, predicted, centred=True, bias=(n - 1) / n,
                                              floor=self.r_floor, ceiling=self.r_ceiling)
         super().update(z, measurement, u, self.R_estimate)
-        self.publish_update(H, self.R_estimate, R)
+        self.publish_update(self.R_estimate, R)
         self.nis = nominal_nis(y, spread, R)
 
 
@@ -207,9 +208,8 @@ class AdaptiveSvdFifthDegreeCKF(PublishedCovariance, FifthDegreeCubatureKalmanFi
         self.windows.push(measurement.channels, y, predicted)
         self.R_estimate = self.windows.noise(measurement.channels, R, predicted, centred=False, bias=1.0,
                                              floor=self.r_floor, ceiling=self.r_ceiling)
-        H = np.linalg.solve(self.P, Pxz).T  # statistical linearization at the prior, as correct() uses
         self.correct(y, Pzz, Pxz, self.R_estimate)
-        self.publish_update(H, self.R_estimate, R)
+        self.publish_update(self.R_estimate, R)
         self.nis = nominal_nis(y, Pzz, R)
         moments = [self.windows.second_moment(c, centred=False) for c in measurement.channels]
         if self.adapt_q and all(m is not None for m in moments):

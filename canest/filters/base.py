@@ -73,7 +73,7 @@ class GaussianFilter:
         self.repairs = 0
         self.x = np.array(x0, dtype=float)
         self.P = np.array(P0, dtype=float)
-        self.y = self.S = self.K = None
+        self.y = self.S = self.K = self.H = None
         self.nis = 0.0
 
     @property
@@ -104,7 +104,7 @@ class GaussianFilter:
         one: symmetric positive definite by construction (then symmetrized).
         """
         A = np.eye(self.x.size) - K @ H
-        self.y, self.S, self.K = y, S, K
+        self.y, self.S, self.K, self.H = y, S, K, H
         self.nis = float(y @ np.linalg.solve(S, y))
         self.x = self.x + K @ y
         self.P = symmetrize(A @ self.P @ A.T + K @ R @ K.T)
