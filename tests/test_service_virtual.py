@@ -12,7 +12,23 @@ from canest.apps.service import Service
 from canest.io.sinks import CallbackSink
 
 IDLE_TICKS = 30
-STARVED_TICKS = 5
+LATE = 0.005  # s a frame may reach the bus behind its schedule before the player, not canest, is at fault
+SETTLE = 1.0  # s after a late stretch in which the estimates may still differ (a reset re-initializes)
+
+
+def excused_ticks(scheduled, received, n, dt):
+    """Ticks the machine, not canest, spoiled: the player shares this process (GIL, garbage collection) and on a
+    busy machine sends frames late, then in a burst; inputs go stale past their timeout and the filter restarts.
+
+    ``scheduled``/``received``: every frame's log time and the time it reached the bus (matched by order). Ticks
+    from a frame ``LATE`` behind its schedule until ``SETTLE`` after the player caught up are excused."""
+    lag = (received - received[0]) - (scheduled - scheduled[0])
+    tick_of_frame = np.floor((scheduled - scheduled[0]) / dt).astype(int)
+    excused = np.zeros(n, dtype=bool)
+    settle = int(round(SETTLE / dt))
+    for k in np.unique(tick_of_frame[lag > LATE]):
+        excused[max(k - 1, 0):k + settle] = True
+    return excused
 
 
 def test_live_service_matches_offline_replay(config, dlc_run, tmp_path):
@@ -23,6 +39,7 @@ def test_live_service_matches_offline_replay(config, dlc_run, tmp_path):
     live = []
     service = Service(live_config, sinks=[CallbackSink(live.append)])
     listener = can.Bus(interface="virtual", channel="svc-out")
+    tap = can.Bus(interface="virtual", channel="svc-in")  # sees every frame with the timestamp the service sees
     player_bus = can.Bus(interface="virtual", channel="svc-in")
 
     def player():
@@ -38,23 +55,30 @@ def test_live_service_matches_offline_replay(config, dlc_run, tmp_path):
     received = []
     while (msg := listener.recv(timeout=0)) is not None:
         received.append(msg)
-    listener.shutdown()
-    player_bus.shutdown()
-    assert summary["decoded"] == len(sim.frames)
+    tapped = []
+    while (msg := tap.recv(timeout=0)) is not None:
+        tapped.append(msg.timestamp)
+    for bus in (listener, tap, player_bus):
+        bus.shutdown()
+    assert summary["decoded"] == len(sim.frames) == len(tapped)
     assert summary["send_dropped"] == 0
     # Idle ticks around the last frame may add or miss a few, and an idle tick's inputs are stale: compare before them.
     n = len(offline) - IDLE_TICKS
     assert len(live) >= n
     live_yaw = np.array([e.values["yaw_rate"] for e in live[:n]])
     offline_yaw = np.array([e.values["yaw_rate"] for e in offline[:n]])
-    # Timing jitter moves a frame across a tick boundary now and then: initialization may move by a tick,
-    # values by up to 0.5 deg/s. The player shares this process (GIL, garbage collection): a stall of it past
-    # the inputs' timeout starves the service for a tick or two (seen twice in CI), which then restarts.
+    excused = excused_ticks(np.array([f.timestamp for f in sim.frames]), np.array(tapped), n, 1.0 / config.estimator.rate_hz)
+    assert excused.mean() < 0.5, f"the player was late on {excused.mean():.0%} of the run: the machine is too busy"
+    # Where every frame came on time, live equals offline: initialization may move by a tick (a frame crossing a
+    # tick boundary), values by up to 0.5 deg/s; no tick is lost.
     first_live, first_offline = np.argmax(np.isfinite(live_yaw)), np.argmax(np.isfinite(offline_yaw))
-    assert abs(first_live - first_offline) <= 1
-    lost = np.isfinite(offline_yaw) & ~np.isfinite(live_yaw)
-    assert lost[first_live + 1:].sum() <= STARVED_TICKS
-    started = np.isfinite(offline_yaw) & np.isfinite(live_yaw)
+    if not excused[:first_offline + 2].any():
+        assert abs(first_live - first_offline) <= 1
+    judged = ~excused
+    judged[:max(first_live, first_offline) + 1] = False
+    lost = np.isfinite(offline_yaw) & ~np.isfinite(live_yaw) & judged
+    assert lost.sum() == 0, f"ticks lost with every frame on time: {np.flatnonzero(lost)[:10]}"
+    started = np.isfinite(offline_yaw) & np.isfinite(live_yaw) & judged
     difference = live_yaw[started] - offline_yaw[started]
     assert np.max(np.abs(difference)) < np.radians(0.5)
     assert np.sqrt(np.mean(difference**2)) < np.radians(0.1)
