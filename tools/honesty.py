@@ -4,6 +4,7 @@
     python tools/honesty.py --filters ckf,jckf                    # 5 maneuvers x mu 0.35, 0.85 x 2 seeds
     python tools/honesty.py --small --filters all                 # 2 maneuvers x 2 frictions x 1 seed, 4 s each
     python tools/honesty.py --filters all --seeds 3 --json > honesty.json
+    python tools/honesty.py --filters ckf,jckf --vibration 1     # the IMU vibrating as on a real car
 
 For every case of maneuvers x speeds x frictions x noise seeds it simulates
 one drive (cached in ``--workdir``), replays it with every filter (each on
@@ -49,11 +50,12 @@ class Case:
     mu: float
     seed: int
     duration: float | None = None  # s; None: the maneuver's own
+    vibration: float = 0.0  # scale of the IMU's body vibration and road spikes (canest.sim.sensors; 0 none)
 
     @property
     def key(self) -> str:
         length = f"-{self.duration:g}s" if self.duration else ""
-        return f"{self.maneuver}-{self.speed:g}kmh-mu{self.mu:g}-s{self.seed}{length}"
+        return f"{self.maneuver}-{self.speed:g}kmh-mu{self.mu:g}-s{self.seed}{length}-vib{self.vibration:g}"
 
 
 def drive(config, case: Case, workdir: Path):
@@ -61,7 +63,8 @@ def drive(config, case: Case, workdir: Path):
     log, truth = workdir / f"{case.key}.log", workdir / f"{case.key}.truth.csv"
     if not truth.exists():
         try:
-            sim = simulate(config, case.maneuver, case.speed, case.mu, seed=case.seed, duration=case.duration)
+            sim = simulate(config, case.maneuver, case.speed, case.mu, seed=case.seed, duration=case.duration,
+                           vibration=case.vibration)
         except SimulationError:
             return None
         sim.write_log(log)
@@ -136,7 +139,7 @@ def _pct(share: float) -> str:
 
 def cases_of(args) -> list:
     split = (lambda text: [p.strip() for p in str(text).split(",") if p.strip()])
-    return [Case(m, float(v), float(mu), seed, args.duration) for m in split(args.maneuvers)
+    return [Case(m, float(v), float(mu), seed, args.duration, args.vibration) for m in split(args.maneuvers)
             for v in split(args.speed) for mu in split(args.mu) for seed in range(args.seeds)]
 
 
@@ -148,6 +151,9 @@ def parse_args(argv=None):
     p.add_argument("--mu", default="0.35,0.85", help="road frictions, comma list (default 0.35,0.85)")
     p.add_argument("--seeds", type=int, default=2, help="noise seeds 0..N-1 per case (default 2)")
     p.add_argument("--duration", type=float, help="seconds per drive (default: each maneuver's own)")
+    p.add_argument("--vibration", type=float, default=0.0,
+                   help="IMU body vibration and road spikes, scale (default 0: white noise; 1: as on a real car, "
+                        "README 'How far to trust the output')")
     p.add_argument("--config", default=str(DEFAULT_CONFIG), help="vehicle config (default: the built-in one)")
     p.add_argument("--workdir", default="honesty-work", help="cache of simulated drives (default ./honesty-work)")
     p.add_argument("--jobs", type=int, default=1, help="cases in parallel processes (default 1)")

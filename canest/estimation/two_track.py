@@ -142,15 +142,21 @@ class FrictionEstimator(Estimator):
 
     def _extra_values(self, values: dict, valid: dict, causes: dict, std: np.ndarray, inputs: TickInputs,
                       lateral_ok: bool) -> None:
-        """Per wheel: friction is valid once excitation made it certain (std below ``MU_VALID_STD``) and the
-        update has not pressed it against a bound of the physical range (the data then say only that the
-        model cannot explain them: the sideslip loses its bit too)."""
-        frictions, friction_stds = self.filter.x[two_track.MU], std[two_track.MU]
+        """Per wheel: friction is valid once excitation made it certain (std below ``MU_VALID_STD``), the
+        channels that show the tires' forces (ax, ay, yaw rate and acceleration) agree with the filter under the
+        configured noise (as for every state, :mod:`canest.estimation.validity`; its std widened by their
+        consistency ratio; not before they have been judged, nor in the second after a reset: the frictions
+        outlive a divergence reset and may be what diverged), and the update has not pressed it against a bound of the physical range (the data
+        then say only that the model cannot explain them: the sideslip loses its bit too)."""
+        ratio = self.judge.consistency.ratio("friction")
+        frictions, friction_stds = self.filter.x[two_track.MU], std[two_track.MU] * validity.inflation(ratio)
         pressed = self.filter.parameters.pressed
         wheel_causes = []
         for name, mu, mu_std, observable, at_bound in zip(FRICTIONS, frictions, friction_stds, self.observable, pressed):
             values[name], values[f"{name}_std"] = mu, mu_std
-            cause = "at_bound" if at_bound else "not_excited" if mu_std >= MU_VALID_STD else "valid"
+            cause = ("at_bound" if at_bound else "after_reset" if causes["beta"] == "after_reset"
+                     else "inconsistent" if ratio > validity.INCONSISTENT
+                     else "not_excited" if mu_std >= MU_VALID_STD or ratio != ratio else "valid")
             valid[name] = cause == "valid"
             valid[f"{name}_observable"] = bool(observable)
             wheel_causes.append(cause)

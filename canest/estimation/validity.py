@@ -105,6 +105,8 @@ OBSERVED_BY = {
     "yaw_rate": ("yaw_rate", "yaw_rate_2"),
     "vx": ("vx_wheel", "vx_reference"),
     "beta": ("ay", "ay_2", "yaw_rate", "yaw_rate_2", "yaw_acceleration"),
+    # friction shows in the body's forces: what the tires transmit, longitudinally, laterally and in yaw
+    "friction": ("ax", "ay", "yaw_rate", "yaw_acceleration"),
 }
 
 
