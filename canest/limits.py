@@ -68,6 +68,8 @@ TIRE = {
     "nominal_friction": Range(0.05, 2.0),
 }
 
+STIFFNESS_UNCERTAINTY = Range(0.0, 1.0)  # vehicle.cornering_stiffness_uncertainty, relative (optional)
+
 DRIVE = {  # vehicle: the axle shares of the longitudinal force, for the tire-force model without motor torques
     "drive_front_share": Range(0.0, 1.0),
     "brake_front_share": Range(0.0, 1.0),

@@ -47,6 +47,9 @@ class VehicleParams:
     tire: TireModelParams = TireModelParams()
     drive_front_share: float = 1.0  # front axle's share of a drive force (config drive: front 1, rear 0, all: given)
     brake_front_share: float = 0.7  # front axle's share of a braking force (brake balance)
+    # relative (1 std) error of the cornering stiffnesses: 0.3 for textbook values, less once identified
+    # (``canest calibrate``); the published sideslip std carries it (estimation.validity)
+    cornering_stiffness_uncertainty: float = 0.3
 
     @property
     def wheelbase(self) -> float:

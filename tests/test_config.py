@@ -88,6 +88,14 @@ def test_negative_mass(tmp_path):
     assert re.search(r":\d+: vehicle\.mass: must be positive", error_of(path))
 
 
+def test_cornering_stiffness_uncertainty_is_read_within_its_range_and_defaults_to_textbook_values(tmp_path):
+    assert load_config(CONFIG).vehicle.cornering_stiffness_uncertainty == 0.2  # the built-in car's own
+    path = write_variant(tmp_path, lambda d: d["vehicle"].pop("cornering_stiffness_uncertainty"))
+    assert load_config(path).vehicle.cornering_stiffness_uncertainty == 0.3
+    path = write_variant(tmp_path, lambda d: d["vehicle"].update(cornering_stiffness_uncertainty=1.5))
+    assert re.search(r":\d+: vehicle\.cornering_stiffness_uncertainty: .*0 to 1", error_of(path))
+
+
 def test_typo_in_a_key(tmp_path):
     path = write_variant(tmp_path, lambda d: d["estimator"].update(rate_hzz=50))
     assert "estimator.rate_hzz: unknown key" in error_of(path)

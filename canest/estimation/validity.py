@@ -28,7 +28,7 @@ Published standard deviations get two terms beyond the filter's covariance:
   ``e`` moves the steady-state sideslip by ``e m a |ay| / (L C_r)`` (rear
   slip angle ``alpha_r = F_yr / C_r`` with ``F_yr = m ay a / L``), added in
   quadrature. A user's stiffness is uncertain by ``e_0``
-  (:data:`CORNERING_STIFFNESS_UNCERTAINTY`); a model with linear tires adds
+  (``vehicle.cornering_stiffness_uncertainty``: 0.3 for textbook values); a model with linear tires adds
   ``e_2 (ay / g)^2``, because every tire's secant stiffness falls with the
   square of its slip at first (the cubic term of any tire curve:
   ``sin(C atan(B a)) ~ C B a - k a^3``): ``e_2`` (:data:`DEGRESSIVE_STIFFNESS`)
@@ -89,7 +89,6 @@ __all__ = ["CAUSES", "GROUPS", "Consistency", "Holds", "KinematicCheck", "Latera
 WINDOW = 50  # channel samples
 MIN_SAMPLES = 10  # before this many samples a channel's mean is not judged
 INCONSISTENT = 9.0  # windowed mean of d above which a state is inconsistent with what is measured
-CORNERING_STIFFNESS_UNCERTAINTY = 0.3  # relative (1 std) error of a user's cornering stiffness
 DEGRESSIVE_STIFFNESS = 0.7  # growth of that error with (ay / g)^2: the tire curve's first nonlinear term
 GRAVITY = 9.81
 VX_VALID_STD = 0.5  # m/s: a published vx less certain than this is "uncertain"
@@ -162,7 +161,7 @@ def inflation(ratio: float) -> float:
 
 def sideslip_model_std(vehicle, ay: float, linear_tires: bool) -> float:
     """Steady-state sideslip error (rad) of a rear cornering stiffness off by its relative uncertainty at ``ay``."""
-    uncertainty = CORNERING_STIFFNESS_UNCERTAINTY + (DEGRESSIVE_STIFFNESS * (ay / GRAVITY) ** 2 if linear_tires else 0.0)
+    uncertainty = vehicle.cornering_stiffness_uncertainty + (DEGRESSIVE_STIFFNESS * (ay / GRAVITY) ** 2 if linear_tires else 0.0)
     return uncertainty * vehicle.mass * vehicle.cg_to_front * abs(ay) / (vehicle.wheelbase * vehicle.cornering_stiffness_rear)
 
 
