@@ -176,9 +176,11 @@ def test_evaluate_of_a_csv_on_another_clock_fails_and_align_puts_it_right(files,
     assert unaligned.stderr.startswith(f"canest: error: {live}: no tick could be scored against")
     assert "--align first" in unaligned.stderr and len(unaligned.stderr.splitlines()) == 1
     by_offset = json.loads(canest("evaluate", live, files["truth"], "--json", "--align", "offset", epoch).stdout)
+    # The epoch clock's times are written to the microsecond: the truth is interpolated up to 1 us off, which moves
+    # a score by a few parts per million (a tick's misalignment would move it by percent)
     for state, score in files["scores"].items():
         numbers = {key: value for key, value in score.items() if key != "unit"}
-        assert {key: by_offset[state][key] for key in numbers} == pytest.approx(numbers, rel=1e-6, abs=1e-9), state
+        assert {key: by_offset[state][key] for key in numbers} == pytest.approx(numbers, rel=1e-4, abs=1e-9), state
     first = canest("evaluate", live, files["truth"], "--json", "--align", "first")
     assert first.returncode == 0
     assert json.loads(first.stdout)["vx"]["samples"] > 400
