@@ -21,8 +21,8 @@ not within ``MU_VALID_STD`` of the highest friction a road has (an estimate
 pressed against that bound says the data only bound friction from below).
 
 Friction may always fall but rises only on a wheel at its limit at the
-estimated friction (:meth:`FrictionEstimator._friction_ceiling`): below it
-the data bound friction from below only.
+estimated friction (:meth:`FrictionEstimator._update`): below it the data
+bound friction from below only.
 
 A divergence reset restarts the states but keeps the frictions: it says the
 states were wrong, not the road.
@@ -102,16 +102,7 @@ class FrictionEstimator(Estimator):
         return derived
 
     def _update(self, channels, inputs: TickInputs, u: np.ndarray, lateral_ok: bool, t: float) -> bool:
-        """Open or close the friction gate and set the one-sided ceiling, then update as every model does."""
-        states = np.stack([self._plausibly_lower_friction(), self.filter.x])
-        excited, at_limit = self.model.friction_sensitivity(states, u) >= self.est.friction_excitation
-        self.observable = excited & lateral_ok & inputs.has(*TORQUES)
-        self.filter.parameters.frozen = np.full(4, not self.observable.any())
-        self.filter.parameters.ceiling = self._friction_ceiling(at_limit)
-        return self._apply(channels, u, t)
-
-    def _friction_ceiling(self, at_limit: np.ndarray) -> np.ndarray:
-        """Per wheel, the highest friction this update may give: unlimited at the tire's limit, else the estimate.
+        """Open or close the friction gate and say which frictions may rise, then update as every model does.
 
         One-sided evidence: a tire below its limit at the estimated friction
         says only that friction is at least what it uses; a force above what
@@ -121,9 +112,15 @@ class FrictionEstimator(Estimator):
         in slip than the model's). So friction rises only on a tire at its
         limit at the estimate (sensitivity at the estimate itself above
         ``friction_excitation``) and can always fall (README "Tire forces and
-        road friction").
+        road friction"); a refused rise leaves the friction and its variance
+        as they were (:class:`canest.filters.parameters.ParameterBlock`).
         """
-        return np.where(at_limit, np.inf, self.filter.x[two_track.MU])
+        states = np.stack([self._plausibly_lower_friction(), self.filter.x])
+        excited, at_limit = self.model.friction_sensitivity(states, u) >= self.est.friction_excitation
+        self.observable = excited & lateral_ok & inputs.has(*TORQUES)
+        self.filter.parameters.frozen = np.full(4, not self.observable.any())
+        self.filter.parameters.may_rise = at_limit
+        return self._apply(channels, u, t)
 
     def _plausibly_lower_friction(self) -> np.ndarray:
         """The state with each friction ``LOWER_FRICTION_STDS`` standard deviations lower (not below ice).

@@ -31,7 +31,7 @@ parameters both innovations are equal. Eqs 36 and 44 print
 34 use the raw second moment minus the mean's outer product, computed here in
 the centered form (the same value without cancellation).
 
-Bounds (after step 3), freezing (a zero gain in step 3) and the variance cap
+Bounds (after step 3), freezing and refused rises (a zero gain in step 3) and the variance cap
 (after step 1) of the parameters: :class:`canest.filters.parameters.ParameterBlock`.
 """
 from __future__ import annotations
@@ -86,7 +86,7 @@ class DoubleCubatureKalmanFilter(GaussianFilter):
         params_view = Measurement(lambda Xp, u_: measurement.h(self._with_states(Xp), u_))
         _, Pzz, Pxz = self.params.predicted_measurement(params_view, u)  # step 3
         at_mean = params_view.h(self.params.x[None, :], u)[0]
-        self.params.correct(z - at_mean, Pzz, Pxz, R + state_spread, gain_mask=~self.parameters.frozen)
+        self.params.correct(z - at_mean, Pzz, Pxz, R + state_spread, gain_mask=self.parameters.gain_mask)
         self.params.x, self.params.P = self.parameters.project(self.params.x, self.params.P)
         self.states.update(z, states_view, u, R)  # step 4
         self.y, self.S, self.K, self.nis = self.states.y, self.states.S, self.states.K, self.states.nis
