@@ -110,10 +110,11 @@ class DoubleCubatureKalmanFilter(GaussianFilter):
         params_view = Measurement(lambda Xp, u_: measurement.h(self._with_states(Xp), u_))
         _, Pzz, Pxz = self.params.predicted_measurement(params_view, u)  # step 3
         at_mean = params_view.h(self.params.x[None, :], u)[0]
+        prior = self.params.x.copy()
         self.params.correct(z - at_mean, Pzz, Pxz, R + state_spread, gain_mask=self.parameters.gain_mask)
         K_p, H_p = self.params.K, self.params.H
         variance = np.diag(self.params.P).copy()
-        self.params.x, self.params.P = self.parameters.project(self.params.x, self.params.P)
+        self.params.x, self.params.P = self.parameters.project(self.params.x, self.params.P, prior)
         self.states.update(z, states_view, u, R)  # step 4
         self.y, self.S, self.K, self.nis = self.states.y, self.states.S, self.states.K, self.states.nis
         self._join()

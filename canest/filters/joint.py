@@ -38,6 +38,7 @@ class JointCubatureKalmanFilter(CubatureKalmanFilter):
 
     def update(self, z: np.ndarray, measurement: Measurement, u, R: np.ndarray) -> None:
         z_hat, Pzz, Pxz = self.predicted_measurement(measurement, u)
-        self.correct(z - z_hat, Pzz, Pxz, R, gain_mask=self.parameters.gain_mask)
         block = self.parameters.index
-        self.x[block], self.P = self.parameters.project(self.x[block], self.P)
+        prior = self.x[block].copy()
+        self.correct(z - z_hat, Pzz, Pxz, R, gain_mask=self.parameters.gain_mask)
+        self.x[block], self.P = self.parameters.project(self.x[block], self.P, prior)

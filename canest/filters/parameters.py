@@ -15,7 +15,10 @@ the state as random-walk parameters:
   would walk the mean into the range's middle, 0.05 per update. Clipping the mean alone left a friction on its
   bound with the variance of a free estimate, flagged valid. ``pressed`` says
   which parameters the update pushed within one standard deviation of a bound
-  (the estimator clears their validity);
+  (moved towards it and ended within it; the estimator clears their
+  validity). A parameter held (frozen, or its rise refused) or moved away from
+  the bound is not pressed: near ice a low friction's own uncertainty
+  (0.3 +- 0.2 above the bound 0.1) is not the data pushing it;
 * parameters in ``frozen`` (set by the estimator: not observable this tick)
   get a zero gain, so they keep their value; so do those outside
   ``may_rise`` (set by the estimator where the data can only bound a
@@ -52,14 +55,14 @@ class ParameterBlock:
         self.may_rise = np.ones(count, dtype=bool)
         self.pressed = np.zeros(count, dtype=bool)
 
-    def project(self, values: np.ndarray, P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(values, P) with each parameter truncated to ``bounds``.
+    def project(self, values: np.ndarray, P: np.ndarray, prior: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(values, P) with each parameter truncated to ``bounds``; ``prior``: the values before the update.
 
         ``P``'s last entries are the parameters (the joint covariance, or the parameters' own)."""
         count = self.frozen.size
         std = np.sqrt(np.maximum(np.diag(P)[-count:], 1e-300))
         low, high = self.bounds
-        self.pressed = (values < low + std) | (values > high - std)
+        self.pressed = ((values < low + std) & (values < prior)) | ((values > high - std) & (values > prior))
         mean, new_std = values.astype(float), std
         below, above = mean < low, mean > high
         mean[below], new_std[below] = truncated(mean[below], std[below], low, 1.0)
