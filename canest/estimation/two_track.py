@@ -143,8 +143,9 @@ class FrictionEstimator(Estimator):
         channels that show the tires' forces (ax, ay, yaw rate and acceleration) agree with the filter under the
         configured noise (as for every state, :mod:`canest.estimation.validity`; its std widened by their
         consistency ratio; not before they have been judged, nor in the second after a reset: the frictions
-        outlive a divergence reset and may be what diverged), and the update has not pressed it against a bound of the physical range (the data
-        then say only that the model cannot explain them: the sideslip loses its bit too)."""
+        outlive a divergence reset and may be what diverged), the update has not pressed it against a bound of the physical range (the data
+        then say only that the model cannot explain them: the sideslip loses its bit too), and the filter's
+        covariance bounds its parameters' error (``parameters_valid``: not the dual filter's, "uncertain")."""
         ratio = self.judge.consistency.ratio("friction")
         frictions, friction_stds = self.filter.x[two_track.MU], std[two_track.MU] * validity.inflation(ratio)
         pressed = self.filter.parameters.pressed
@@ -153,6 +154,7 @@ class FrictionEstimator(Estimator):
             values[name], values[f"{name}_std"] = mu, mu_std
             cause = ("at_bound" if at_bound else "after_reset" if causes["beta"] == "after_reset"
                      else "inconsistent" if ratio > validity.INCONSISTENT
+                     else "uncertain" if not self.filter.parameters_valid
                      else "not_excited" if mu_std >= MU_VALID_STD or ratio != ratio else "valid")
             valid[name] = cause == "valid"
             valid[f"{name}_observable"] = bool(observable)

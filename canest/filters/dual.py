@@ -48,7 +48,13 @@ error covariance is the Joseph form ``(I - K H) P (I - K H)^T + K R K^T``
 parameters' variances capped as P_p's are. Without it
 the friction filter's own P_p published a std 3-4 times smaller than its
 errors (honesty grid, 80 km/h, friction 0.35 and 0.85: NEES 11-17, 34-61 %
-within 2 std).
+within 2 std). With it the sideslip is honest (NEES 2.0 -> 1.16, valid but
+wrong 3.4 % -> 0) but the frictions are not (NEES 8.6-14, 46-71 % within 2
+std, wrong by more than 3 std on 13-32 % of their ticks): their error is the
+bias of step 3's estimate conditioned on predicted states (a tire model with
+the wrong friction explained by a wrong sideslip), which no first-order
+covariance of the gains carries. So the parameters are published but never
+valid (``parameters_valid``; the estimator's cause ``uncertain``).
 """
 from __future__ import annotations
 
@@ -64,6 +70,7 @@ IDENTITY = Transition(lambda X, u, dt: X)
 class DoubleCubatureKalmanFilter(GaussianFilter):
     name = "dckf"
     needs = frozenset({"state_parameters"})
+    parameters_valid = False  # no covariance bounds the parameters' error (see above)
 
     def __init__(self, x0, P0, factorization: str = "svd", parameters: int = 4, parameter_bounds=(-np.inf, np.inf)):
         super().__init__(x0, P0)
