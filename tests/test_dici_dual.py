@@ -162,7 +162,7 @@ def test_jckf_equals_the_kalman_filter_on_a_coupled_linear_system_where_dckf_doe
     assert not np.allclose(dual.x, x, atol=1e-3)
 
 
-def test_jckf_frozen_parameters_hold_their_variance_is_capped_and_bounds_truncate_and_ceiling_clips():
+def test_jckf_frozen_parameters_hold_their_variance_is_capped_and_bounds_truncate():
     f = JointCubatureKalmanFilter([2.0, 0.8], np.diag([0.1, 0.09]), parameters=1, parameter_bounds=(0.1, 1.3))
     f.parameters.frozen = np.array([True])
     for _ in range(500):
@@ -179,10 +179,28 @@ def test_jckf_frozen_parameters_hold_their_variance_is_capped_and_bounds_truncat
     assert 1.3 - 2 * std < f.x[1] < 1.3  # the truncated Gaussian's mean lies inside, about 0.8 std from the bound
     assert f.parameters.pressed[0]
     assert np.all(np.linalg.eigvalsh(f.P) > 0)
-    f.parameters.ceiling = np.array([1.0])  # the estimator's one-sided limit for this update
-    f.predict(STATE_AND_GAIN, None, 0.01, np.diag([0.01, 0.001]))
-    f.update(np.array([6.0, 2.0]), PRODUCT, None, np.diag([0.05, 0.05]))
-    assert f.x[1] == pytest.approx(1.0)
+
+
+@pytest.mark.parametrize("kind", (JointCubatureKalmanFilter, DoubleCubatureKalmanFilter))
+def test_a_refused_rise_keeps_the_parameter_and_its_variance_and_a_fall_is_taken(kind):
+    """One-sided evidence (``may_rise`` clear: the data bound the parameter from below only). Clipping the risen
+    mean back kept the variance the refused evidence had shrunk; noise then ratcheted the mean down (falls kept,
+    rises clipped) while the variance fell as if every update had been used."""
+    f = kind([2.0, 0.8], np.diag([0.1, 0.09]), parameters=1, parameter_bounds=(0.1, 1.3))
+    f.parameters.may_rise = np.array([False])
+    rises = falls = 0
+    for k in range(200):
+        f.predict(STATE_AND_GAIN, None, 0.01, np.diag([0.01, 0.0001]))
+        before, variance = f.x[1], f.P[1, 1]
+        f.update(np.array([1.6 + (0.3 if k % 2 else -0.3), 2.0]), PRODUCT, None, np.diag([0.05, 0.05]))
+        if f.x[1] == before:  # refused: the step would have raised it
+            rises += 1
+            assert f.P[1, 1] == pytest.approx(variance)
+        else:
+            falls += 1
+            assert f.x[1] < before and f.P[1, 1] < variance
+        assert np.all(np.linalg.eigvalsh(f.P) > 0)
+    assert rises > 10 and falls > 10  # both kinds of tick were seen
 
 
 def test_jckf_needs_a_parameter_block():

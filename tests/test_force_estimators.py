@@ -63,6 +63,17 @@ def test_friction_on_can_with_observability_flags(config, dlc_run, tmp_path, nam
         assert np.all(table[f"mu_{w}_std"][table["t"] > 0.5] <= 0.3 + 1e-9)  # never above the prior's std
 
 
+def test_the_dual_filters_frictions_are_published_but_never_valid(config, dlc_run, tmp_path):
+    """dckf's frictions are wrong by more than 3 std on 13-32 % of their ticks even with its joint error covariance
+    (honesty grid); they were flagged valid on 70-86 % of them. Published, never valid: cause "uncertain"."""
+    log, _, _ = dlc_run
+    table, out_log, _ = run(config, log, tmp_path, "dckf")
+    assert np.all(np.isfinite(table["mu_fl"][table["t"] > 0.5]))
+    frames = decoded(config, out_log, "CE_Friction")
+    assert len(frames) > 500 and not any(f[f"Mu{w.upper()}Valid"] for f in frames for w in WHEELS)
+    assert any(str(f["FrictionCause"]) == "uncertain" for f in decoded(config, out_log, "CE_ValidityCause"))
+
+
 @pytest.fixture(scope="module")
 def low_friction_sine(config, tmp_path_factory):
     """A 50 km/h sine steer on friction 0.35: the tires saturate from ~1.5 s on."""

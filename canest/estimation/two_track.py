@@ -21,8 +21,8 @@ not within ``MU_VALID_STD`` of the highest friction a road has (an estimate
 pressed against that bound says the data only bound friction from below).
 
 Friction may always fall but rises only on a wheel at its limit at the
-estimated friction (:meth:`FrictionEstimator._friction_ceiling`): below it
-the data bound friction from below only.
+estimated friction (:meth:`FrictionEstimator._update`): below it the data
+bound friction from below only.
 
 A divergence reset restarts the states but keeps the frictions: it says the
 states were wrong, not the road.
@@ -102,16 +102,7 @@ class FrictionEstimator(Estimator):
         return derived
 
     def _update(self, channels, inputs: TickInputs, u: np.ndarray, lateral_ok: bool, t: float) -> bool:
-        """Open or close the friction gate and set the one-sided ceiling, then update as every model does."""
-        states = np.stack([self._plausibly_lower_friction(), self.filter.x])
-        excited, at_limit = self.model.friction_sensitivity(states, u) >= self.est.friction_excitation
-        self.observable = excited & lateral_ok & inputs.has(*TORQUES)
-        self.filter.parameters.frozen = np.full(4, not self.observable.any())
-        self.filter.parameters.ceiling = self._friction_ceiling(at_limit)
-        return self._apply(channels, u, t)
-
-    def _friction_ceiling(self, at_limit: np.ndarray) -> np.ndarray:
-        """Per wheel, the highest friction this update may give: unlimited at the tire's limit, else the estimate.
+        """Open or close the friction gate and say which frictions may rise, then update as every model does.
 
         One-sided evidence: a tire below its limit at the estimated friction
         says only that friction is at least what it uses; a force above what
@@ -121,9 +112,15 @@ class FrictionEstimator(Estimator):
         in slip than the model's). So friction rises only on a tire at its
         limit at the estimate (sensitivity at the estimate itself above
         ``friction_excitation``) and can always fall (README "Tire forces and
-        road friction").
+        road friction"); a refused rise leaves the friction and its variance
+        as they were (:class:`canest.filters.parameters.ParameterBlock`).
         """
-        return np.where(at_limit, np.inf, self.filter.x[two_track.MU])
+        states = np.stack([self._plausibly_lower_friction(), self.filter.x])
+        excited, at_limit = self.model.friction_sensitivity(states, u) >= self.est.friction_excitation
+        self.observable = excited & lateral_ok & inputs.has(*TORQUES)
+        self.filter.parameters.frozen = np.full(4, not self.observable.any())
+        self.filter.parameters.may_rise = at_limit
+        return self._apply(channels, u, t)
 
     def _plausibly_lower_friction(self) -> np.ndarray:
         """The state with each friction ``LOWER_FRICTION_STDS`` standard deviations lower (not below ice).
@@ -146,8 +143,9 @@ class FrictionEstimator(Estimator):
         channels that show the tires' forces (ax, ay, yaw rate and acceleration) agree with the filter under the
         configured noise (as for every state, :mod:`canest.estimation.validity`; its std widened by their
         consistency ratio; not before they have been judged, nor in the second after a reset: the frictions
-        outlive a divergence reset and may be what diverged), and the update has not pressed it against a bound of the physical range (the data
-        then say only that the model cannot explain them: the sideslip loses its bit too)."""
+        outlive a divergence reset and may be what diverged), the update has not pressed it against a bound of the physical range (the data
+        then say only that the model cannot explain them: the sideslip loses its bit too), and the filter's
+        covariance bounds its parameters' error (``parameters_valid``: not the dual filter's, "uncertain")."""
         ratio = self.judge.consistency.ratio("friction")
         frictions, friction_stds = self.filter.x[two_track.MU], std[two_track.MU] * validity.inflation(ratio)
         pressed = self.filter.parameters.pressed
@@ -156,6 +154,7 @@ class FrictionEstimator(Estimator):
             values[name], values[f"{name}_std"] = mu, mu_std
             cause = ("at_bound" if at_bound else "after_reset" if causes["beta"] == "after_reset"
                      else "inconsistent" if ratio > validity.INCONSISTENT
+                     else "uncertain" if not self.filter.parameters_valid
                      else "not_excited" if mu_std >= MU_VALID_STD or ratio != ratio else "valid")
             valid[name] = cause == "valid"
             valid[f"{name}_observable"] = bool(observable)

