@@ -247,8 +247,9 @@ class Estimator:
         return self._publish(t, mode, missing, inputs, lateral_ok)
 
     def _extra_values(self, values: dict, valid: dict, causes: dict, std: np.ndarray, inputs: TickInputs,
-                      lateral_ok: bool) -> None:
-        """Add model-specific values, ``_std``, validity and causes (none for the single-track model)."""
+                      ratios: dict) -> None:
+        """Add model-specific values, ``_std``, validity and causes (none for the single-track model); ``ratios``:
+        this tick's consistency ratio per state (:meth:`StateJudge.ratios`)."""
 
     def _publish(self, t, mode, missing, inputs: TickInputs, lateral_ok: bool = False) -> Estimate:
         self.last_mode = mode
@@ -279,5 +280,5 @@ class Estimator:
         causes = self.judge.causes(inputs, ratios, std[self.vx], lateral, t, drift)
         valid = {name: causes[name] == "valid" for name in causes}
         valid["vy"] = valid["beta"] and valid["vx"]
-        self._extra_values(values, valid, causes, std, inputs, lateral_ok)
+        self._extra_values(values, valid, causes, std, inputs, ratios)
         return Estimate(t, values, valid, mode, self.est.filter, self.filter.nis, missing, self.resets, causes)

@@ -83,11 +83,11 @@ class TireForceEstimator(Estimator):
         return self._diverged(t)
 
     def _extra_values(self, values: dict, valid: dict, causes: dict, std: np.ndarray, inputs: TickInputs,
-                      lateral_ok: bool) -> None:
+                      ratios: dict) -> None:
         """The forces are valid where sideslip is (they are judged by the same lateral channels) and the inputs of
         the longitudinal forces (torques, else ax) are in."""
         cause = causes["beta"] if causes["beta"] != "valid" or inputs.has(*self.force_inputs) else "no_input"
-        inflation = validity.inflation(self.judge.consistency.ratio("beta"))
+        inflation = validity.inflation(ratios["beta"])
         for name, force, force_std in zip(LATERAL_FORCES, self.filter.x[tire_force.FY], std[tire_force.FY]):
             values[name], values[f"{name}_std"] = force, force_std * inflation
             valid[name] = cause == "valid"

@@ -39,6 +39,8 @@ the single-track binding skips ay.
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from canest.estimation import validity
@@ -138,24 +140,26 @@ class FrictionEstimator(Estimator):
         return x
 
     def _extra_values(self, values: dict, valid: dict, causes: dict, std: np.ndarray, inputs: TickInputs,
-                      lateral_ok: bool) -> None:
+                      ratios: dict) -> None:
         """Per wheel: friction is valid once excitation made it certain (std below ``MU_VALID_STD``), the
         channels that show the tires' forces (ax, ay, yaw rate and acceleration) agree with the filter under the
         configured noise (as for every state, :mod:`canest.estimation.validity`; its std widened by their
         consistency ratio; not before they have been judged, nor in the second after a reset: the frictions
-        outlive a divergence reset and may be what diverged), the update has not pressed it against a bound of the physical range (the data
-        then say only that the model cannot explain them: the sideslip loses its bit too), and the filter's
-        covariance bounds its parameters' error (``parameters_valid``: not the dual filter's, "uncertain")."""
-        ratio = self.judge.consistency.ratio("friction")
+        outlive a divergence reset and may be what diverged), the update has not pressed it against a bound of
+        the physical range (the data then say only that the model cannot explain them: the sideslip loses its
+        bit too), and the filter's covariance bounds its parameters' error (``parameters_valid``: not the dual
+        filter's, "uncertain")."""
+        ratio = ratios["friction"]
         frictions, friction_stds = self.filter.x[two_track.MU], std[two_track.MU] * validity.inflation(ratio)
         pressed = self.filter.parameters.pressed
+        every_wheel = ("after_reset" if causes["beta"] == "after_reset"
+                       else "inconsistent" if ratio > validity.INCONSISTENT
+                       else "uncertain" if not self.filter.parameters_valid
+                       else "not_excited" if math.isnan(ratio) else None)  # what holds for all four alike
         wheel_causes = []
         for name, mu, mu_std, observable, at_bound in zip(FRICTIONS, frictions, friction_stds, self.observable, pressed):
             values[name], values[f"{name}_std"] = mu, mu_std
-            cause = ("at_bound" if at_bound else "after_reset" if causes["beta"] == "after_reset"
-                     else "inconsistent" if ratio > validity.INCONSISTENT
-                     else "uncertain" if not self.filter.parameters_valid
-                     else "not_excited" if mu_std >= MU_VALID_STD or ratio != ratio else "valid")
+            cause = "at_bound" if at_bound else every_wheel or ("not_excited" if mu_std >= MU_VALID_STD else "valid")
             valid[name] = cause == "valid"
             valid[f"{name}_observable"] = bool(observable)
             wheel_causes.append(cause)
