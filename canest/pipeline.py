@@ -3,7 +3,9 @@
 Feed frames in time order with :meth:`Pipeline.feed`; it returns the
 estimates of every tick that completed before the frame (a tick at time T
 uses every frame stamped <= T). A live source with an idle bus calls
-:meth:`Pipeline.advance` so ticks still happen and stale inputs are noticed.
+:meth:`Pipeline.advance` so ticks still happen and stale inputs are noticed;
+a frame stamped at or before a tick that already ran that way is used in the
+next tick and counted ``late_frames`` (replay never has one).
 Where frames come from and where estimates go is the caller's business.
 """
 from __future__ import annotations
@@ -57,6 +59,10 @@ class Pipeline:
             return []
         if self.last_time is not None and t < self.last_time:
             self.counts["time_backwards"] += 1
+        elif self.ticked and t <= self.clock.next_tick - self.clock.dt:
+            # its tick already ran without it: a live source advanced the clock on an idle bus (advance) before
+            # this frame was read; replay would have used it in that tick, so here live and replay part
+            self.counts["late_frames"] += 1
         self.last_time = t if self.last_time is None else max(self.last_time, t)
         values = self.decoder.decode(msg)
         if values is not None:

@@ -141,6 +141,29 @@ def test_time_jump_and_backwards_timestamps_are_counted_not_stepped(config, dlc_
     assert ticks_before > 0
 
 
+def test_frame_read_after_its_tick_ran_on_an_idle_bus_is_counted_late(config, dlc_run):
+    """A live source advances the ticks on an idle bus; a frame stamped before a tick that already ran is used
+    in the next one and counted, so a difference from the offline replay is the machine's, and said."""
+    from canest.pipeline import Pipeline
+
+    _, _, sim = dlc_run
+    frames = sim.frames[:400]
+    offline = Pipeline(config)
+    for frame in frames:
+        offline.feed(frame)
+    assert offline.counts["late_frames"] == 0
+    live = Pipeline(config)
+    for frame in frames[:300]:
+        live.feed(frame)
+    ran = live.advance(frames[310].timestamp)  # the socket held frames 300.. while the clock ran on
+    assert ran
+    last_tick = ran[-1].t
+    for frame in frames[300:]:
+        live.feed(frame)
+    assert live.counts["late_frames"] == sum(f.timestamp <= last_tick for f in frames[300:]) > 0
+    assert live.counts["time_backwards"] == 0
+
+
 def test_monitor_shows_estimates_and_health_of_a_running_service(config, dlc_run):
     import io
 
