@@ -16,8 +16,9 @@ only when the drive excites it and the car is steady enough for it to hold:
   ``gyro_bias`` and the lateral offset ``ay_bias`` (the accelerometer's bias plus the mean bank's
   ``-g sin(bank)``: no sensor here tells them apart);
 - ``steering`` (above ``MIN_STEER_SPEED``, |ay| below ``LINEAR_AY``, steady steering and yaw rate):
-  ``delta_sw = offset + k R (L r / v + K_us ay)`` observes ``steering_offset``, ``ratio`` (``k``, a
-  factor on the configured ratio ``R``) and ``understeer`` (``K_us``, the stiffnesses' balance);
+  ``delta_sw = offset + R (k L r / v + u ay)`` observes ``steering_offset`` and, in bends, ``ratio`` (``k``,
+  a factor on the configured ratio ``R``) and ``u = k K_us``, reported as ``understeer`` (``K_us``, the
+  stiffnesses' balance): linear in what it learns, so no linearization point can mislead it;
 - ``longitudinal`` (moving, |ay| small): ``ax_m = s dv_w/dt + b_ax`` observes ``ax_bias`` (bias plus the
   mean grade's ``g sin(grade)``);
 - ``standstill`` (wheels still): ``r_m = b_r``.
@@ -56,6 +57,7 @@ HISTORY = 4  # blocks kept for the rates (0.4 s)
 MIN_SPEED = 5.0  # m/s
 MIN_STEER_SPEED = 8.0  # m/s: slower, the slip angles leave the linear single-track model
 LINEAR_AY = 2.5  # m/s^2
+MIN_BEND_AY = 0.5  # m/s^2: a bend that excites the steering ratio and the understeer gradient
 MAX_YAW_ACCELERATION = 0.05  # rad/s^2 over the history: steady
 MAX_STEERING_RATE = math.radians(5.0)  # rad/s at the steering wheel over the history: steady
 MAX_AX = 2.0  # m/s^2: harder braking slips the wheels and pitches the body
@@ -99,16 +101,35 @@ class OnlineCalibration:
     # -- learning --------------------------------------------------------------------------------------------
 
     @property
+    def values(self) -> np.ndarray:
+        """The parameters as reported and saved: the state, but the understeer gradient ``K_us = u / k``."""
+        values = self.x.copy()
+        values[UNDERSTEER] = self.x[UNDERSTEER] / self.x[RATIO]
+        return values
+
+    @property
     def std(self) -> np.ndarray:
-        return np.sqrt(np.maximum(np.diag(self.P), 0.0))
+        """Standard deviations of :attr:`values` (``K_us``'s by the delta method from ``u`` and ``k``)."""
+        std = np.sqrt(np.maximum(np.diag(self.P), 0.0))
+        k, u = self.x[RATIO], self.x[UNDERSTEER]
+        J = np.array([-u / (k * k), 1.0 / k])
+        both = [RATIO, UNDERSTEER]
+        std[UNDERSTEER] = math.sqrt(max(float(J @ self.P[np.ix_(both, both)] @ J), 0.0))
+        return std
 
     @property
     def converged(self) -> np.ndarray:
         """Per parameter: std below its threshold after ``MIN_EVIDENCE`` s of excitation."""
         return (self.std < np.array([p.converged for p in self.specs])) & (self.evidence >= MIN_EVIDENCE)
 
-    def _update(self, z: float, h: float, H: np.ndarray, noise: float, kind: str) -> None:
-        """One scalar Kalman update (Joseph form), left out beyond ``GATE``; counts the excited parameters."""
+    def _update(self, z: float, h: float, H: np.ndarray, noise: float, kind: str, learns=None) -> None:
+        """One scalar Kalman update (Joseph form), left out beyond ``GATE``; counts the excited parameters.
+
+        ``learns`` (indices; default all) are the parameters the update may move: the others are *considered*
+        (Schmidt-Kalman): their uncertainty widens the innovation's variance and their covariance with the learned
+        ones is kept, so a later update of them corrects what was learned against their error, but this update's
+        model error cannot leak into them. The Joseph form keeps P symmetric positive semi-definite for any gain,
+        the zeroed rows included."""
         R = noise * noise
         PH = self.P @ H
         S = float(H @ PH) + R
@@ -117,10 +138,14 @@ class OnlineCalibration:
             self.updates["gated"] += 1
             return
         K = PH / S
+        if learns is not None:
+            considered = np.ones(len(K), dtype=bool)
+            considered[list(learns)] = False
+            K[considered] = 0.0
         self.x = np.clip(self.x + K * innovation, self.low, self.high)
         A = np.eye(len(self.x)) - np.outer(K, H)
         self.P = A @ self.P @ A.T + np.outer(K, K) * R
-        self.excited |= np.abs(H) * self.prior_std > 0.3 * noise
+        self.excited |= (np.abs(H) * self.prior_std > 0.3 * noise) & (K != 0.0)
         self.updates[kind] += 1
 
     def _learn(self, block: Block) -> None:
@@ -155,25 +180,39 @@ class OnlineCalibration:
             self._steering_update(block)
 
     def _steering_update(self, block: Block) -> None:
-        """``delta_sw = offset + k R (L r / v + K_us (ay_m - c))`` with ``r = r_m - b_r``, ``v = s v_w``.
+        """``delta_sw = offset + R (k L r / v + u (ay_m - c))``, ``u = k K_us``, ``r = r_m - b_r``, ``v = s v_w``.
 
         ``ay_m - c`` is ``v r`` in steady driving: the flat road's tire force. On a banked road the tires carry
         ``g sin(bank)`` less, so the learned offset is the offset of the *equivalent flat road*, off by
         ``k R K_us g sin(bank)``; with it, the corrected inputs (steering, yaw rate, ay less ``c``) agree with the
         estimator's flat-road model (which no learned value could do for the true offset and a bank it lacks).
-        Speed, gyro bias and ``c`` are taken as known here (no Jacobian entries): the kinematic identity learns them
-        exactly in any steady driving, and this one's model error (tires short of linear, transients) would
-        otherwise leak into them (a gyro bias 0.1 deg/s off on the simulator)."""
+
+        The state holds ``u = k K_us`` instead of ``K_us``: the identity is then linear in the parameters it
+        learns (``offset + R (k L r / v + u ay)``). In ``k`` and ``K_us`` it is bilinear, and a linearization at
+        a wrong ``K_us`` sent the ratio 29 % off on a banked road. Speed, gyro bias and ``c`` are *considered*
+        (:meth:`_update`), not learned here: the kinematic identity learns them in any steady driving, and this
+        one's model error would leak into them (on a banked road the equivalent flat road's offset moved the gyro
+        bias from 0.5 to 1.2 deg/s in 30 s). Taken as known instead (before), their error in the first minute (a
+        gyro bias 0.5 deg/s is 1.2 deg of steering at 20 m/s) was learned as ratio and understeer, whose growing
+        confidence then gated out every bend: ratio -28 %, understeer of the wrong sign after 120 s. Ratio and
+        understeer are learned only in bends (``|ay| >= MIN_BEND_AY``): on a straight their columns are the speed
+        and bias errors' noise, not the steering's geometry."""
         p = self.vehicle
-        s, bias, c, offset, k, K = (self.x[i] for i in (SPEED, GYRO, AY, OFFSET, RATIO, UNDERSTEER))
+        s, bias, c, offset, k, u = (self.x[i] for i in (SPEED, GYRO, AY, OFFSET, RATIO, UNDERSTEER))
         ratio, L, ay = p.steering_ratio, p.wheelbase, block.ay - c
         v, r = s * block.wheel_speed, block.yaw_rate - bias
-        h = identities.steady_steering_wheel_angle(v, r, ay, offset, k * ratio, L, K)
+        h = identities.steady_steering_wheel_angle(v, r, ay, offset, k * ratio, L, u / k)
         H = np.zeros(len(self.x))
+        H[SPEED] = -k * ratio * L * r / (s * v)
+        H[GYRO] = -k * ratio * L / v
+        H[AY] = -ratio * u
         H[OFFSET] = 1.0
-        H[RATIO] = ratio * (L * r / v + K * ay)
-        H[UNDERSTEER] = k * ratio * ay
-        self._update(block.steering_wheel_angle, h, H, NOISE["steering"], "steering")
+        learns = (OFFSET,)
+        if abs(ay) >= MIN_BEND_AY:
+            H[RATIO] = ratio * L * r / v
+            H[UNDERSTEER] = ratio * ay
+            learns = (OFFSET, RATIO, UNDERSTEER)
+        self._update(block.steering_wheel_angle, h, H, NOISE["steering"], "steering", learns)
 
     def _follow(self) -> None:
         """Move each converged, applied parameter toward its learned value, rate-limited."""
@@ -222,10 +261,10 @@ class OnlineCalibration:
         return self._report
 
     def _build_report(self) -> dict:
-        std, converged = self.std, self.converged
+        values, std, converged = self.values, self.std, self.converged
         out = {}
         for i, name in enumerate(NAMES):
-            out[f"calib_{name}"] = float(self.x[i])
+            out[f"calib_{name}"] = float(values[i])
             out[f"calib_{name}_std"] = float(std[i])
             out[f"calib_{name}_applied"] = float(self.applied[i])
             out[f"calib_{name}_learned"] = bool(self.evidence[i] > 0.0)
@@ -236,7 +275,8 @@ class OnlineCalibration:
 
     def state(self) -> dict:
         """What :class:`canest.estimation.calibration_state.CalibrationStore` saves."""
-        return {name: {"value": float(self.x[i]), "variance": float(self.P[i, i]), "evidence": float(self.evidence[i]),
+        values, variances = self.values, self.std ** 2
+        return {name: {"value": float(values[i]), "variance": float(variances[i]), "evidence": float(self.evidence[i]),
                        "applied": float(self.applied[i])} for i, name in enumerate(NAMES)}
 
     def restore(self, saved: dict) -> None:
@@ -244,7 +284,11 @@ class OnlineCalibration:
         for i, name in enumerate(NAMES):
             entry = saved[name]
             self.x[i], self.evidence[i], self.applied[i] = entry["value"], entry["evidence"], entry["applied"]
-        self.P = np.diag([saved[name]["variance"] for name in NAMES])
+        variances = np.array([saved[name]["variance"] for name in NAMES])
+        k, understeer = self.x[RATIO], self.x[UNDERSTEER]
+        self.x[UNDERSTEER] = k * understeer  # the state's u = k K_us, its variance as if k and K_us were independent:
+        variances[UNDERSTEER] = k * k * variances[UNDERSTEER] + understeer**2 * variances[RATIO]  # K_us's std grows
+        self.P = np.diag(variances)
         self._report = None
 
     def _maybe_save(self, t: float) -> None:
