@@ -158,6 +158,22 @@ def test_nothing_is_applied_before_thirty_seconds_of_evidence_then_rate_limited(
     assert moved.any() and not moved[NAMES.index("understeer")]  # the balance is reported, never applied
 
 
+def test_the_lateral_offset_is_applied_only_with_the_steering_offset(config):
+    """ay less c is the flat road's tire force only beside the equivalent flat road's steering."""
+    calibration = OnlineCalibration(config.vehicle, NAMES_IN, 0.01)
+    ay, offset = NAMES.index("ay_bias"), NAMES.index("steering_offset")
+    calibration.x[ay], calibration.x[offset] = 0.3, math.radians(1.0)
+    calibration.evidence[:] = 60.0
+    calibration.P = np.diag([p.converged ** 2 / 4.0 for p in calibration.specs])
+    calibration.P[offset, offset] = (2.0 * calibration.specs[offset].converged) ** 2
+    assert calibration.converged[ay] and not calibration.converged[offset]
+    calibration._follow()
+    assert calibration.applied[ay] == 0.0 and calibration.applied[offset] == 0.0
+    calibration.P[offset, offset] = (calibration.specs[offset].converged / 2.0) ** 2
+    calibration._follow()
+    assert calibration.applied[ay] > 0.0 and calibration.applied[offset] > 0.0
+
+
 def test_converged_corrections_reach_the_estimator(config, learned):
     """The sample the estimator gets: wheel speeds scaled, yaw rate and ay less their learned offsets."""
     calibration = learned[0].calibration

@@ -215,8 +215,15 @@ class OnlineCalibration:
         self._update(block.steering_wheel_angle, h, H, NOISE["steering"], "steering", learns)
 
     def _follow(self) -> None:
-        """Move each converged, applied parameter toward its learned value, rate-limited."""
+        """Move each converged, applied parameter toward its learned value, rate-limited.
+
+        The lateral offset ``c`` follows only once the steering offset has converged too: ``c`` holds a bank's
+        ``-g sin(bank)``, and ay less ``c`` (the kinematic ``v r``) agrees with the estimator's flat-road model
+        only beside the steering of the equivalent flat road (:meth:`_steering_update`). Applied alone on a road
+        banked 3 deg it made the sideslip RMSE after 60 s 0.20 deg against 0.12 without any calibration; paired,
+        0.087 (on the flat road 0.0975 against 0.0952 applied alone: the ay bias waits for the steering offset)."""
         converged = self.converged
+        converged[AY] &= converged[OFFSET]
         for i in APPLIED:
             if converged[i]:
                 step = self.specs[i].rate * BLOCK
