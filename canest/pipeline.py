@@ -34,15 +34,20 @@ class Pipeline:
         self.clock = TickClock(1.0 / config.estimator.rate_hz)
         self.counts = Counter()
         self.last_time = None
+        self.last_tick = None  # the latest tick estimated
         self.ticked = 0  # ticks run: the drive's length for the reset rate
 
     def _ticks(self, t: float) -> list:
         jumps = self.clock.jumps
-        estimates = [self._step(tick) for tick in self.clock.due(t)]
+        ticks = list(self.clock.due(t))
+        estimates = [self._step(tick) for tick in ticks]
         self.ticked += len(estimates)
         if self.clock.jumps != jumps:
             self.counts["time_jumps"] += 1
             self.estimator.reset()
+            self.last_tick = None  # a new grid: no frame is late for the old one
+        elif ticks:
+            self.last_tick = ticks[-1]  # the tick's own float: t0 + k dt, not next_tick - dt
         return estimates
 
     def _step(self, tick: float):
@@ -59,7 +64,7 @@ class Pipeline:
             return []
         if self.last_time is not None and t < self.last_time:
             self.counts["time_backwards"] += 1
-        elif self.ticked and t <= self.clock.next_tick - self.clock.dt:
+        elif self.last_tick is not None and t <= self.last_tick:
             # its tick already ran without it: a live source advanced the clock on an idle bus (advance) before
             # this frame was read; replay would have used it in that tick, so here live and replay part
             self.counts["late_frames"] += 1
