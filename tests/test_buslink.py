@@ -37,5 +37,7 @@ def test_a_full_output_queue_drops_frames_without_blocking(config, dlc_run):
     stuck.shutdown()
     assert summary["sent"] == 5 and summary["send_dropped"] > 500  # the 5 that fit the queue, then drops
     assert "output_bus_lost" not in summary, "a full queue is not a lost bus"
-    assert max(b - a for a, b in zip(ticks, ticks[1:])) < 0.1, "the loop blocked on the full output"
+    # A send that waited for room (python-can's default) would hold the loop on every tick, for good without a
+    # timeout; a busy machine's scheduler pauses it far less than a second.
+    assert max(b - a for a, b in zip(ticks, ticks[1:])) < 1.0, "the loop blocked on the full output"
     assert summary["ticks"] > 250

@@ -11,40 +11,34 @@ from canest.apps.replay import play_messages, replay
 from canest.apps.service import Service
 from canest.io.sinks import CallbackSink
 
-IDLE_TICKS = 30
-LATE = 0.005  # s a frame may reach the bus behind its schedule before the player, not canest, is at fault
-SETTLE = 1.0  # s after a late stretch in which the estimates may still differ (a reset re-initializes)
 
+def test_live_service_matches_offline_replay(config, dlc_run):
+    """Frames played onto a bus in real time give the estimates replay gives, tick for tick.
 
-def excused_ticks(scheduled, received, n, dt):
-    """Ticks the machine, not canest, spoiled: the player shares this process (GIL, garbage collection) and on a
-    busy machine sends frames late, then in a burst; inputs go stale past their timeout and the filter restarts.
-
-    ``scheduled``/``received``: every frame's log time and the time it reached the bus (matched by order). Ticks
-    from a frame ``LATE`` behind its schedule until ``SETTLE`` after the player caught up are excused."""
-    lag = (received - received[0]) - (scheduled - scheduled[0])
-    tick_of_frame = np.floor((scheduled - scheduled[0]) / dt).astype(int)
-    excused = np.zeros(n, dtype=bool)
-    settle = int(round(SETTLE / dt))
-    for k in np.unique(tick_of_frame[lag > LATE]):
-        excused[max(k - 1, 0):k + settle] = True
-    return excused
-
-
-def test_live_service_matches_offline_replay(config, dlc_run, tmp_path):
-    log, _, sim = dlc_run
+    The player shares this process and a busy machine delays it; what canest guarantees (a tick uses every frame
+    stamped before it) is tested apart from that: the frames keep their log timestamps and the service's idle
+    clock is the log time the player has reached, so the loop never runs a tick ahead of frames the player has
+    not sent yet. How live ticking copes with a late bus (``late_frames``) is tested in the SocketCAN lane."""
+    log, _, _ = dlc_run
     offline = []
     replay(config, log, progress=False, on_estimate=offline.append)
+    frames = list(can.LogReader(log))  # the replayed frames, with the same timestamps
+    reached = [frames[0].timestamp]  # log time of the newest frame sent (set before sending it: never ahead)
     live_config = config.with_buses(BusConfig("virtual", "svc-in"), BusConfig("virtual", "svc-out"))
     live = []
-    service = Service(live_config, sinks=[CallbackSink(live.append)])
+    service = Service(live_config, sinks=[CallbackSink(live.append)], clock=lambda: reached[0])
     listener = can.Bus(interface="virtual", channel="svc-out")
-    tap = can.Bus(interface="virtual", channel="svc-in")  # sees every frame with the timestamp the service sees
-    player_bus = can.Bus(interface="virtual", channel="svc-in")
+    player_bus = can.Bus(interface="virtual", channel="svc-in", preserve_timestamps=True)
 
     def player():
         time.sleep(0.2)
-        play_messages(sim.frames, player_bus, speed=1.0)
+        start = time.perf_counter()
+        for frame in frames:
+            delay = frame.timestamp - frames[0].timestamp - (time.perf_counter() - start)
+            if delay > 0:
+                time.sleep(delay)
+            reached[0] = frame.timestamp
+            player_bus.send(frame)
         time.sleep(0.2)
         service.stop()
 
@@ -55,33 +49,17 @@ def test_live_service_matches_offline_replay(config, dlc_run, tmp_path):
     received = []
     while (msg := listener.recv(timeout=0)) is not None:
         received.append(msg)
-    tapped = []
-    while (msg := tap.recv(timeout=0)) is not None:
-        tapped.append(msg.timestamp)
-    for bus in (listener, tap, player_bus):
-        bus.shutdown()
-    assert summary["decoded"] == len(sim.frames) == len(tapped)
-    assert summary["send_dropped"] == 0
-    # Idle ticks around the last frame may add or miss a few, and an idle tick's inputs are stale: compare before them.
-    n = len(offline) - IDLE_TICKS
-    assert len(live) >= n
-    live_yaw = np.array([e.values["yaw_rate"] for e in live[:n]])
-    offline_yaw = np.array([e.values["yaw_rate"] for e in offline[:n]])
-    excused = excused_ticks(np.array([f.timestamp for f in sim.frames]), np.array(tapped), n, 1.0 / config.estimator.rate_hz)
-    assert excused.mean() < 0.5, f"the player was late on {excused.mean():.0%} of the run: the machine is too busy"
-    # Where every frame came on time, live equals offline: initialization may move by a tick (a frame crossing a
-    # tick boundary), values by up to 0.5 deg/s; no tick is lost.
-    first_live, first_offline = np.argmax(np.isfinite(live_yaw)), np.argmax(np.isfinite(offline_yaw))
-    if not excused[:first_offline + 2].any():
-        assert abs(first_live - first_offline) <= 1
-    judged = ~excused
-    judged[:max(first_live, first_offline) + 1] = False
-    lost = np.isfinite(offline_yaw) & ~np.isfinite(live_yaw) & judged
-    assert lost.sum() == 0, f"ticks lost with every frame on time: {np.flatnonzero(lost)[:10]}"
-    started = np.isfinite(offline_yaw) & np.isfinite(live_yaw) & judged
-    difference = live_yaw[started] - offline_yaw[started]
-    assert np.max(np.abs(difference)) < np.radians(0.5)
-    assert np.sqrt(np.mean(difference**2)) < np.radians(0.1)
+    listener.shutdown()
+    player_bus.shutdown()
+    assert summary["decoded"] == len(frames)
+    assert summary["send_dropped"] == 0 and "late_frames" not in summary
+    # Replay ticks up to its last frame; live runs the idle ticks before it too: one more at most.
+    assert len(offline) - 1 <= len(live) <= len(offline)
+    n = len(live)
+    assert [e.t for e in live] == [e.t for e in offline[:n]]
+    for state in ("yaw_rate", "beta", "vx", "yaw_rate_std"):
+        np.testing.assert_array_equal([e.values[state] for e in live], [e.values[state] for e in offline[:n]])
+    assert [e.valid_flags for e in live] == [e.valid_flags for e in offline[:n]]
     # One frame set per loop pass: ticks completed together send only the newest.
     assert sum(1 for m in received if m.arbitration_id == 0x501) == len(live) - summary["superseded"]
     assert summary["superseded"] < 0.05 * len(live)

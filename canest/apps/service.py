@@ -57,10 +57,13 @@ class Service:
     Every tick's estimates go to ``sinks`` (:mod:`canest.io.sinks`, e.g. a CSV
     or a callback) and the newest of each pass to the output bus.
     ``reload_config`` (no arguments, returns a Config) is called on SIGHUP.
+    ``clock`` is the time base of the input frames' timestamps, read when the bus is idle: ``time.time`` for
+    SocketCAN's and python-can's receive stamps.
     """
 
-    def __init__(self, config: Config, sinks=(), reload_config=None, notifier=None):
+    def __init__(self, config: Config, sinks=(), reload_config=None, notifier=None, clock=time.time):
         self.config = config
+        self.clock = clock
         self.pipeline = Pipeline(config, output_channel=config.output_bus.channel)
         self.sinks = list(sinks)
         self.reload_config = reload_config
@@ -103,7 +106,7 @@ class Service:
         for sink in (*self.sinks, self.bus_sink):
             sink.publish(estimates)
         newest = estimates[-1]
-        self.latency.append(time.time() - newest.t)
+        self.latency.append(self.clock() - newest.t)
         if not self.ready and any(newest.valid.values()):
             self.ready = True
             self.notifier.notify(READY=1, STATUS="estimating")
@@ -114,22 +117,22 @@ class Service:
         self._open()
         log.info("estimating: %s -> %s, filter %s at %.0f Hz", self.config.input_bus.channel,
                  self.config.output_bus.channel, self.config.estimator.filter, self.config.estimator.rate_hz)
-        clock = _Schedule(self.notifier.watchdog_interval)
+        schedule = _Schedule(self.notifier.watchdog_interval)
         try:
-            now = time.time()
+            now = self.clock()
             while not self.stopping.is_set():
                 msg = self.inputs.recv(self._wait(now))
                 if msg is not None:
                     estimates = self.pipeline.feed(msg)
                     # the kernel's receive time: no clock read per frame (a non-finite one was rejected)
-                    now = msg.timestamp if math.isfinite(msg.timestamp) else time.time()
+                    now = msg.timestamp if math.isfinite(msg.timestamp) else self.clock()
                 else:
-                    now = time.time()
+                    now = self.clock()
                     estimates = self.pipeline.advance(now - TICK_MARGIN)
                 if estimates:
                     self._publish(estimates)
                 if estimates or msg is None:  # at most once a tick or an idle wait, not once a frame
-                    self._housekeeping(clock)
+                    self._housekeeping(schedule)
         finally:
             self.pipeline.close()  # the online calibration saved
             self._close()
@@ -147,13 +150,13 @@ class Service:
         due = self.pipeline.clock.next_tick + TICK_MARGIN - now
         return min(max(due, 0.0), period)
 
-    def _housekeeping(self, clock: "_Schedule") -> None:
+    def _housekeeping(self, schedule: "_Schedule") -> None:
         now = time.monotonic()
-        if clock.due("watchdog", now):
+        if schedule.due("watchdog", now):
             self.notifier.notify(WATCHDOG=1)
-        if clock.due("notify_status", now):
-            self.notifier.notify(STATUS=self._status_line(clock.rates(self.summary(), now)))
-        if clock.due("log_status", now) or self.status_requested.is_set():
+        if schedule.due("notify_status", now):
+            self.notifier.notify(STATUS=self._status_line(schedule.rates(self.summary(), now)))
+        if schedule.due("log_status", now) or self.status_requested.is_set():
             self.status_requested.clear()
             log.info("status: %s | latency %s", format_summary(self.summary()), self.latency_text())
             self.latency.clear()  # each status line reports the latency since the previous one
