@@ -19,6 +19,12 @@ excited this tick; ``Mu..Valid`` that the standard deviation is below
 ``MU_VALID_STD`` (excitation was seen recently enough) and the estimate is
 not within ``MU_VALID_STD`` of the highest friction a road has (an estimate
 pressed against that bound says the data only bound friction from below).
+The published standard deviation adds, to the filter's, the error a wrong
+slip stiffness puts into the frictions (:class:`FrictionModelError`) and the
+range the estimate spanned over the last ``SETTLE_WINDOW`` (a road's friction
+does not change within a second: what the estimate did meanwhile is its
+error, e.g. a plunge from the prior in a step steer, or a slide the model
+reads as a friction split).
 
 Friction may always fall but rises only on a wheel at its limit at the
 estimated friction (:meth:`FrictionEstimator._update`): below it the data
@@ -40,6 +46,7 @@ the single-track binding skips ay.
 from __future__ import annotations
 
 import math
+from collections import deque
 
 import numpy as np
 
@@ -56,6 +63,35 @@ FRICTIONS = tuple(f"mu_{w}" for w in WHEELS)
 MU_VALID_STD = 0.15
 LOWER_FRICTION_STDS = 3.0  # the excitation gate tests each friction this many standard deviations below its estimate
 YAW_ACCELERATION_WINDOW = 7
+EVIDENCE_MEMORY = 2.0  # s of excited driving over which the frictions' model error is averaged
+SETTLE_WINDOW = 1.0  # s over which the range a friction spanned is part of its std
+
+
+class FrictionModelError:
+    """The error a wrong slip stiffness puts into the friction estimates (a considered parameter, not estimated).
+
+    Near its limit a tire's force ``F(mu, C)`` depends on its friction and on its slip stiffness: a stiffness off by
+    a relative ``e`` (``vehicle.cornering_stiffness_uncertainty``), read as friction, moves ``mu`` by
+    ``e |dF/d ln C| / |dF/d mu|`` at the same force. The filter weighs each excited tick's evidence by its
+    information ``(dF/d mu)^2 / R``, so the estimate's error is the information-weighted mean of those ratios,
+    pooled over the four wheels (one road): ``e sum(S_mu S_C) / sum(S_mu^2)``, older evidence forgotten over
+    ``EVIDENCE_MEMORY`` s of excitation. Deep in saturation ``S_C`` is zero (the force is the peak); in the linear
+    range ``S_mu`` is, and the ratio says friction was not measured.
+    """
+
+    def __init__(self, uncertainty: float, dt: float):
+        self.uncertainty = uncertainty
+        self.decay = math.exp(-dt / EVIDENCE_MEMORY)
+        self.information = self.cross = 0.0
+
+    def add(self, friction_sensitivity: np.ndarray, stiffness_sensitivity: np.ndarray) -> None:
+        """One excited tick's evidence: both sensitivities per wheel at the estimate (N per unit mu, N)."""
+        self.information = self.decay * self.information + float(np.sum(friction_sensitivity**2))
+        self.cross = self.decay * self.cross + float(np.sum(friction_sensitivity * stiffness_sensitivity))
+
+    @property
+    def std(self) -> float:
+        return self.uncertainty * self.cross / self.information if self.information > 0.0 else 0.0
 
 
 class FrictionEstimator(Estimator):
@@ -66,6 +102,8 @@ class FrictionEstimator(Estimator):
         self.observable = np.zeros(len(FRICTIONS), dtype=bool)
         self.yaw_acceleration = WheelAcceleration(YAW_ACCELERATION_WINDOW)
         self.last_friction = None
+        self.model_error = FrictionModelError(config.vehicle.cornering_stiffness_uncertainty, self.dt)
+        self.recent = deque(maxlen=max(1, round(SETTLE_WINDOW / self.dt)))  # the frictions over SETTLE_WINDOW
         correlation = self.est.friction_correlation
         mixing = correlation * np.ones((4, 4)) + (1.0 - correlation) * np.eye(4)
         for matrix in (self.Q, self.p0):  # the four wheels are on one road: correlated prior and random walk
@@ -118,9 +156,12 @@ class FrictionEstimator(Estimator):
         as they were (:class:`canest.filters.parameters.ParameterBlock`).
         """
         states = np.stack([self._plausibly_lower_friction(), self.filter.x])
-        excited, at_limit = self.model.friction_sensitivity(states, u) >= self.est.friction_excitation
+        sensitivity = self.model.friction_sensitivity(states, u)
+        excited, at_limit = sensitivity >= self.est.friction_excitation
         self.observable = excited & lateral_ok & inputs.has(*TORQUES)
         self.filter.parameters.frozen = np.full(4, not self.observable.any())
+        if self.observable.any():
+            self.model_error.add(sensitivity[1], self.model.stiffness_sensitivity(self.filter.x, u))
         self.filter.parameters.may_rise = at_limit
         return self._apply(channels, u, t)
 
@@ -148,18 +189,26 @@ class FrictionEstimator(Estimator):
         outlive a divergence reset and may be what diverged), the update has not pressed it against a bound of
         the physical range (the data then say only that the model cannot explain them: the sideslip loses its
         bit too), and the filter's covariance bounds its parameters' error (``parameters_valid``: not the dual
-        filter's, "uncertain")."""
+        filter's, "uncertain"). The published std adds :class:`FrictionModelError`'s and the range the
+        estimate spanned over ``SETTLE_WINDOW`` in quadrature; above ``MU_VALID_STD`` through them the cause is
+        "uncertain" (through the filter's own, "not_excited")."""
         ratio = ratios["friction"]
-        frictions, friction_stds = self.filter.x[two_track.MU], std[two_track.MU] * validity.inflation(ratio)
+        frictions, filter_stds = self.filter.x[two_track.MU], std[two_track.MU] * validity.inflation(ratio)
+        self.recent.append(frictions.copy())
+        movement = np.ptp(self.recent, axis=0)
+        friction_stds = np.sqrt(filter_stds**2 + self.model_error.std**2 + movement**2)
         pressed = self.filter.parameters.pressed
         every_wheel = ("after_reset" if causes["beta"] == "after_reset"
                        else "inconsistent" if ratio > validity.INCONSISTENT
                        else "uncertain" if not self.filter.parameters_valid
                        else "not_excited" if math.isnan(ratio) else None)  # what holds for all four alike
         wheel_causes = []
-        for name, mu, mu_std, observable, at_bound in zip(FRICTIONS, frictions, friction_stds, self.observable, pressed):
+        for name, mu, mu_std, filter_std, observable, at_bound in zip(FRICTIONS, frictions, friction_stds,
+                                                                       filter_stds, self.observable, pressed):
             values[name], values[f"{name}_std"] = mu, mu_std
-            cause = "at_bound" if at_bound else every_wheel or ("not_excited" if mu_std >= MU_VALID_STD else "valid")
+            cause = "at_bound" if at_bound else every_wheel or ("not_excited" if filter_std >= MU_VALID_STD
+                                                                else "uncertain" if mu_std >= MU_VALID_STD
+                                                                else "valid")
             valid[name] = cause == "valid"
             valid[f"{name}_observable"] = bool(observable)
             wheel_causes.append(cause)

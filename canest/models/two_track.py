@@ -57,8 +57,10 @@ class TwoTrackModel:
         self.tire = tire
         self.wheels = WheelGeometry(vehicle)
 
-    def forces(self, X: np.ndarray, u: np.ndarray):
-        """Wheel-frame (Fx, Fy), their pure-slip longitudinal slope dFx/ds and the wheel speeds v_long, all (N, 4)."""
+    def forces(self, X: np.ndarray, u: np.ndarray, stiffness_scale=1.0):
+        """Wheel-frame (Fx, Fy), their pure-slip longitudinal slope dFx/ds and the wheel speeds v_long, all (N, 4).
+
+        ``stiffness_scale`` (a scalar or one per row, shape (N, 1)) multiplies both slip stiffnesses."""
         r, vx = X[:, YAW], np.maximum(X[:, VX], MIN_WHEEL_SPEED)
         v_long, v_lat = self.wheels.wheel_velocities(r, vx, vx * np.tan(X[:, BETA]), u[DELTA])
         alpha = self.wheels.slip_angles(v_long, v_lat)
@@ -66,9 +68,10 @@ class TwoTrackModel:
         fz = self.wheels.loads(u[AX], u[AY])
         peak = np.clip(X[:, MU], *MU_RANGE) * fz
         t = self.tire
-        long_stiffness = t.longitudinal_stiffness * fz
+        long_stiffness = stiffness_scale * t.longitudinal_stiffness * fz
+        lateral_stiffness = stiffness_scale * self.wheels.cornering_stiffness(fz, t)
         fx = magic_formula(slip, long_stiffness, t.longitudinal_shape, t.longitudinal_curvature, peak)
-        fy = magic_formula(alpha, self.wheels.cornering_stiffness(fz, t), t.lateral_shape, t.lateral_curvature, peak)
+        fy = magic_formula(alpha, lateral_stiffness, t.lateral_shape, t.lateral_curvature, peak)
         slope = magic_formula_slope(slip, long_stiffness, t.longitudinal_shape, t.longitudinal_curvature, peak)
         fx, fy = friction_circle(fx, fy, peak)
         return fx, fy, slope, np.maximum(v_long, MIN_WHEEL_SPEED)
@@ -106,7 +109,19 @@ class TwoTrackModel:
         X = np.repeat(np.atleast_2d(x), 2, axis=0)
         X[0::2, MU] += SENSITIVITY_STEP
         X[1::2, MU] -= SENSITIVITY_STEP
-        fx, fy, _, _ = self.forces(X, u)
-        magnitude = np.hypot(fx, fy)
-        sensitivity = np.abs(magnitude[0::2] - magnitude[1::2]) / (2.0 * SENSITIVITY_STEP)
+        sensitivity = self._central_difference(X, u, 1.0, SENSITIVITY_STEP)
         return sensitivity if np.ndim(x) == 2 else sensitivity[0]
+
+    def stiffness_sensitivity(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:
+        """|d|F_ij| / d ln C| per wheel (N) at the state ``x`` of shape (n,): how much a relative error of both slip
+        stiffnesses moves each tire's force. Zero deep in saturation (the force is the peak ``mu Fz``), the
+        force itself in the linear range."""
+        X = np.repeat(np.atleast_2d(x), 2, axis=0)
+        scale = 1.0 + SENSITIVITY_STEP * np.array([[1.0], [-1.0]])
+        return self._central_difference(X, u, scale, SENSITIVITY_STEP)[0]
+
+    def _central_difference(self, X: np.ndarray, u: np.ndarray, stiffness_scale, step: float) -> np.ndarray:
+        """(|F| of the even rows - |F| of the odd rows) / (2 step), in absolute value, per wheel."""
+        fx, fy, _, _ = self.forces(X, u, stiffness_scale)
+        magnitude = np.hypot(fx, fy)
+        return np.abs(magnitude[0::2] - magnitude[1::2]) / (2.0 * step)
