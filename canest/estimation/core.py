@@ -110,8 +110,7 @@ class Estimator:
         self.stale_before = self.stale_now = frozenset()  # inputs stale on the previous and on this tick
         self.geometry = WheelGeometry(config.vehicle)
         self.reference_speed = ReferenceSpeed(self.vehicle.wheel_radius, self.vehicle.tire.longitudinal_stiffness,
-                                              self.est.measurement_noise["vx_reference"], self.est.measurement_noise["ax"],
-                                              self.est.measurement_noise["ay"])
+                                              self.est.measurement_noise["vx_reference"])
         self.reference_wheel_acceleration = WheelAcceleration()
         self.steering_zero = steering_zero(config)
 
@@ -173,9 +172,8 @@ class Estimator:
                  for torque, load in zip(TORQUES, loads)]
         beta, vx = self.filter.x[self.beta], self.filter.x[self.vx]
         accelerations = self.reference_wheel_acceleration.update(t, speeds).tolist()
-        yaw_rate = inputs.current("yaw_rate")
-        return self.reference_speed.update(t, ax + yaw_rate * vx * math.tan(beta), speeds, accelerations, usage,
-                                           sliding=ay - yaw_rate * vx)
+        return self.reference_speed.update(t, ax + inputs.current("yaw_rate") * vx * math.tan(beta), speeds,
+                                           accelerations, usage)
 
     def _derived(self, inputs: TickInputs, t: float, lateral_ok: bool) -> dict:
         """Channels computed from the inputs this tick: name -> (value, standard deviation, age).
