@@ -134,3 +134,32 @@ def test_dici_keeps_estimating_yaw_rate_when_the_first_imu_goes_silent(config, d
     late = table["t"] > 4.0
     error = table["yaw_rate"][late] - np.interp(table["t"][late], truth["t"], truth["yaw_rate"])
     assert np.degrees(np.sqrt(np.mean(error**2))) < 0.5
+
+
+def test_the_frictions_model_error_weighs_each_ticks_ratio_by_its_information():
+    """``e sum(S_mu S_C) / sum(S_mu^2)``: deep in saturation (no stiffness sensitivity) the force is the peak
+    and says friction exactly; evidence from a tire nearer its linear range carries the stiffness's error."""
+    from canest.estimation.two_track import EVIDENCE_MEMORY, FrictionModelError
+
+    error = FrictionModelError(uncertainty=0.2, dt=0.01)
+    assert error.std == 0.0  # no evidence yet: nothing to add
+    error.add(np.full(4, 4000.0), np.zeros(4))  # saturated tires
+    assert error.std == 0.0
+    error.add(np.full(4, 1000.0), np.full(4, 3000.0))  # a tire leaving saturation: ratio 3, a quarter of the weight
+    decay = np.exp(-0.01 / EVIDENCE_MEMORY)
+    expected = 0.2 * (1000.0 * 3000.0) / (decay * 4000.0**2 + 1000.0**2)
+    assert error.std == pytest.approx(expected)
+    assert 0.0 < error.std < 0.2 * 3.0
+
+
+def test_a_tires_stiffness_sensitivity_is_its_force_in_the_linear_range_and_zero_at_the_peak(config):
+    from canest.models.two_track import TwoTrackModel
+
+    model = TwoTrackModel(config.vehicle, config.vehicle.tire)
+    vx, radius = 20.0, config.vehicle.wheel_radius
+    u = np.array([0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0])
+    small_slip = np.array([0.0, 0.002, vx, *[vx / radius] * 4, *[0.9] * 4])  # 0.1 deg of sideslip
+    fx, fy, _, _ = model.forces(small_slip[None, :], u)
+    assert model.stiffness_sensitivity(small_slip, u) == pytest.approx(np.hypot(fx, fy)[0], rel=0.02)
+    sliding = np.array([0.0, 0.3, vx, *[vx / radius] * 4, *[0.2] * 4])  # 17 deg on friction 0.2
+    assert np.all(model.stiffness_sensitivity(sliding, u) < 0.01 * model.friction_sensitivity(sliding, u))
