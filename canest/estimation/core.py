@@ -44,6 +44,7 @@ from canest.estimation import channels as ch
 from canest.estimation import validity
 from canest.estimation.derived_ax import derived_ax
 from canest.estimation.estimate import OUTPUT_STATES, Estimate
+from canest.estimation.gyro_hold import GyroHold
 from canest.estimation.inputs import WHEEL_SPEEDS, TickInputs
 from canest.estimation.judge import DIVERGENCE_NIS, StateJudge
 from canest.estimation.reference_speed import ReferenceSpeed
@@ -56,6 +57,7 @@ from canest.settings import Config
 from canest.signals import INPUT_GROUPS
 
 TORQUES = INPUT_GROUPS["motor_torques"]
+GYROS = ("yaw_rate", "yaw_rate_2")  # measurement channels read straight from a gyro
 
 log = logging.getLogger("canest.estimator")
 
@@ -112,6 +114,8 @@ class Estimator:
         self.reference_speed = ReferenceSpeed(self.vehicle.wheel_radius, self.vehicle.tire.longitudinal_stiffness,
                                               self.est.measurement_noise["vx_reference"])
         self.reference_wheel_acceleration = WheelAcceleration()
+        self.gyro_holds = {row: (name, GyroHold()) for row, name in enumerate(model.measurement_names)
+                           if name in GYROS}
         self.steering_zero = steering_zero(config)
 
     def reset(self) -> None:
@@ -119,6 +123,8 @@ class Estimator:
         self.filter = None
         self.judge.reset()
         self.reference_wheel_acceleration.reset()
+        for _, hold in self.gyro_holds.values():
+            hold.reset()
 
     def _diverged(self, t: float) -> bool:
         """True when the gyro or the speed channel disagrees with the prior beyond ``DIVERGENCE_NIS``, windowed."""
@@ -192,6 +198,11 @@ class Estimator:
 
     def _channels(self, inputs: TickInputs, t: float, lateral_ok: bool) -> ch.Channels:
         derived = self._derived(inputs, t, lateral_ok)
+        for row, (name, hold) in self.gyro_holds.items():  # the gyros' samples at the tick, not held
+            if inputs.has(name):
+                value = hold.at(t, inputs.values[name], inputs.ages[name], inputs.fresh[name])
+                if inputs.any_fresh(name):
+                    derived.setdefault(name, (value, self.r_std[row], 0.0))
         return ch.assemble(self.model.measurement_names, self.r_std, inputs, derived, lateral_ok)
 
     def _apply(self, channels: ch.Channels, u: np.ndarray, t: float, mask=None) -> bool:

@@ -1,0 +1,32 @@
+"""The gyro's held sample brought forward to the tick (first-order hold)."""
+import numpy as np
+import pytest
+
+from canest.estimation.gyro_hold import GyroHold
+
+
+def test_a_ramp_is_extrapolated_to_the_tick():
+    """A yaw rate rising 150 deg/s^2 (a spin), sampled at 100 Hz 8 ms before each tick: the held value is
+    1.2 deg/s behind; the hold's is on the ramp."""
+    hold, rate = GyroHold(), np.radians(150.0)
+    for k in range(10):
+        t = 0.01 * k + 0.008
+        at_tick = hold.at(t, rate * 0.01 * k, age=0.008, fresh=True)
+    assert at_tick == pytest.approx(rate * t)
+
+
+def test_a_sample_is_counted_once_and_older_samples_ride_the_same_slope():
+    hold = GyroHold()
+    for k in range(5):
+        hold.at(0.01 * k, 0.1 * k, age=0.0, fresh=True)  # slope 10 rad/s^2
+    held = hold.at(0.045, 0.4, age=0.005, fresh=False)  # the same sample, a tick later: not a new point
+    assert held == pytest.approx(0.4 + 0.005 * 10.0)
+    assert hold.at(0.045, 0.4, age=0.005, fresh=True) == pytest.approx(held)  # same sample time: ignored
+
+
+def test_reset_forgets_the_slope():
+    hold = GyroHold()
+    for k in range(5):
+        hold.at(0.01 * k, 0.1 * k, age=0.0, fresh=True)
+    hold.reset()
+    assert hold.at(1.0, 0.3, age=0.008, fresh=True) == 0.3  # one sample: no slope yet
