@@ -78,11 +78,16 @@ def live_accuracy(live_csv, truth_csv, received, sent_frames):
     return {s.state: s.rmse for s in score(live, read_table(truth_csv), skip=0.5)}, live
 
 
+ROUNDING = 1e-5  # rad/s: a microsecond of stamp rounding times a gyro slope of up to 10 rad/s^2
+
+
 def compare_with_offline(live, received_log, late_frames):
     """The live estimates are the offline replay of what the daemon received, however the guest's load delayed
     the daemon. candump keeps the kernel's receive times to the microsecond where the daemon saw nanoseconds, so
     a frame within a microsecond of a tick boundary may fall on the other side of it offline: a few ticks may
-    differ by a sample's worth (seen: 28 of 813 ticks, at most 0.003 deg/s). Live ends with idle ticks replay
+    differ by a sample's worth (seen: 28 of 813 ticks, at most 0.003 deg/s), and every gyro sample brought
+    forward to the tick (:mod:`canest.estimation.gyro_hold`) moves by its slope times that rounding (up to
+    ``ROUNDING`` rad/s; seen: 27 % of ticks above 1e-7, none above 1e-6). Live ends with idle ticks replay
     lacks. Where the loaded guest held frames in the socket past the time the daemon ran their tick without
     them (its idle-bus clock), the daemon counts them ``late_frames`` and used them a tick later: from there
     live and replay part by the filter's memory of a sample moved by 10 ms (seen: 11 % of ticks, up to
@@ -100,10 +105,10 @@ def compare_with_offline(live, received_log, late_frames):
     # estimated) live and, where the gap passes a second, re-anchors the offline ticks instead
     assert started.sum() >= 0.8 * (n - max(first_live, first_offline))
     difference = live_yaw[started] - offline_yaw[started]
-    print(f"late frames {late_frames}; ticks differing from the replay {np.mean(np.abs(difference) > 1e-7):.1%}, "
+    print(f"late frames {late_frames}; ticks differing from the replay {np.mean(np.abs(difference) > ROUNDING):.1%}, "
           f"at most {np.degrees(np.max(np.abs(difference))):.4f} deg/s")
     if late_frames == 0:
-        assert np.mean(np.abs(difference) > 1e-7) < 0.1  # most ticks identical to the CSV's 9 digits
+        assert np.mean(np.abs(difference) > ROUNDING) < 0.1  # most ticks identical but for the stamps' rounding
         assert np.max(np.abs(difference)) < np.radians(0.05)
     else:
         assert np.max(np.abs(difference)) < np.radians(0.5)  # samples a tick late, not a different estimator
