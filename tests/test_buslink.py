@@ -5,6 +5,7 @@ import time
 import can
 
 from canest.settings import BusConfig
+from canest.apps.replay import paced
 from canest.apps.service import Service
 from canest.io.sinks import CallbackSink
 
@@ -21,11 +22,7 @@ def test_a_full_output_queue_drops_frames_without_blocking(config, dlc_run):
 
     def play():
         time.sleep(0.2)
-        start = time.perf_counter()
-        for frame in sim.frames[:1500]:
-            delay = frame.timestamp - sim.frames[0].timestamp - (time.perf_counter() - start)
-            if delay > 0:
-                time.sleep(delay)
+        for frame in paced(sim.frames[:1500]):
             player.send(frame)
         service.stop()
 

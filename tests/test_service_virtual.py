@@ -7,7 +7,7 @@ import numpy as np
 
 from canest.settings import BusConfig
 from canest.apps.demo import run_demo
-from canest.apps.replay import play_messages, replay
+from canest.apps.replay import paced, play_messages, replay
 from canest.apps.service import Service
 from canest.io.sinks import CallbackSink
 
@@ -32,11 +32,7 @@ def test_live_service_matches_offline_replay(config, dlc_run):
 
     def player():
         time.sleep(0.2)
-        start = time.perf_counter()
-        for frame in frames:
-            delay = frame.timestamp - frames[0].timestamp - (time.perf_counter() - start)
-            if delay > 0:
-                time.sleep(delay)
+        for frame in paced(frames):
             reached[0] = frame.timestamp
             player_bus.send(frame)
         time.sleep(0.2)

@@ -99,21 +99,28 @@ def play(log_path, bus: can.BusABC, speed: float = 1.0, progress: bool = True, l
     return sent
 
 
+def paced(messages, speed: float = 1.0, stop=None):
+    """Yield each message once its time since the first, divided by ``speed``, has passed on the wall clock;
+    ``stop`` (an Event) ends early."""
+    start_wall = start_log = None
+    for msg in messages:
+        if stop is not None and stop.is_set():
+            return
+        if start_wall is None:
+            start_wall, start_log = time.perf_counter(), msg.timestamp
+        delay = (msg.timestamp - start_log) / speed - (time.perf_counter() - start_wall)
+        if delay > 0:
+            time.sleep(delay)
+        yield msg
+
+
 def play_messages(messages, bus: can.BusABC, speed: float = 1.0, progress: bool = False, desc: str = "play",
                   stop=None) -> int:
-    """Send messages at the spacing of their timestamps divided by ``speed``; ``stop`` (an Event) ends early.
-    ``progress``: a bar of frames sent, on a terminal only."""
+    """Send messages at the spacing of their timestamps divided by ``speed`` (:func:`paced`), stamped when sent;
+    ``stop`` (an Event) ends early. ``progress``: a bar of frames sent, on a terminal only."""
     sent = 0
-    start_wall = start_log = None
     with terminal_bar(progress, desc=desc, unit=" frames") as bar:
-        for msg in messages:
-            if stop is not None and stop.is_set():
-                break
-            if start_wall is None:
-                start_wall, start_log = time.perf_counter(), msg.timestamp
-            delay = (msg.timestamp - start_log) / speed - (time.perf_counter() - start_wall)
-            if delay > 0:
-                time.sleep(delay)
+        for msg in paced(messages, speed, stop):
             bus.send(can.Message(timestamp=time.time(), arbitration_id=msg.arbitration_id,
                                  is_extended_id=msg.is_extended_id, is_remote_frame=msg.is_remote_frame,
                                  is_fd=msg.is_fd, bitrate_switch=msg.bitrate_switch, dlc=msg.dlc, data=msg.data))
