@@ -11,22 +11,22 @@ def test_a_ramp_is_extrapolated_to_the_tick():
     hold, rate = GyroHold(), np.radians(150.0)
     for k in range(10):
         t = 0.01 * k + 0.008
-        at_tick = hold.at(t, rate * 0.01 * k, age=0.008, fresh=True)
+        at_tick = hold.at(t, rate * 0.01 * k, age=0.008)
     assert at_tick == pytest.approx(rate * t)
 
 
-def test_a_sample_is_counted_once_and_older_samples_ride_the_same_slope():
+def test_a_sample_is_counted_once():
     hold = GyroHold()
     for k in range(5):
-        hold.at(0.01 * k, 0.1 * k, age=0.0, fresh=True)  # slope 10 rad/s^2
-    held = hold.at(0.045, 0.4, age=0.005, fresh=False)  # the same sample, a tick later: not a new point
+        hold.at(0.01 * k, 0.1 * k, age=0.0)  # slope 10 rad/s^2
+    held = hold.at(0.045, 0.4, age=0.005)  # the last sample again: not a new point
     assert held == pytest.approx(0.4 + 0.005 * 10.0)
-    assert hold.at(0.045, 0.4, age=0.005, fresh=True) == pytest.approx(held)  # same sample time: ignored
+    assert hold.at(0.045, 0.4, age=0.005) == pytest.approx(held)
 
 
 def test_reset_forgets_the_slope():
     hold = GyroHold()
     for k in range(5):
-        hold.at(0.01 * k, 0.1 * k, age=0.0, fresh=True)
+        hold.at(0.01 * k, 0.1 * k, age=0.0)
     hold.reset()
-    assert hold.at(1.0, 0.3, age=0.008, fresh=True) == 0.3  # one sample: no slope yet
+    assert hold.at(1.0, 0.3, age=0.008) == 0.3  # one sample: no slope yet

@@ -198,11 +198,9 @@ class Estimator:
 
     def _channels(self, inputs: TickInputs, t: float, lateral_ok: bool) -> ch.Channels:
         derived = self._derived(inputs, t, lateral_ok)
-        for row, (name, hold) in self.gyro_holds.items():  # the gyros' samples at the tick, not held
-            if inputs.has(name):
-                value = hold.at(t, inputs.values[name], inputs.ages[name], inputs.fresh[name])
-                if inputs.any_fresh(name):
-                    derived.setdefault(name, (value, self.r_std[row], 0.0))
+        for row, (name, hold) in self.gyro_holds.items():  # a fresh gyro sample at the tick, not as held
+            if inputs.has(name) and inputs.any_fresh(name):
+                derived.setdefault(name, (hold.at(t, inputs.values[name], inputs.ages[name]), self.r_std[row], 0.0))
         return ch.assemble(self.model.measurement_names, self.r_std, inputs, derived, lateral_ok)
 
     def _apply(self, channels: ch.Channels, u: np.ndarray, t: float, mask=None) -> bool:

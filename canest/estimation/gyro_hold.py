@@ -31,10 +31,10 @@ class GyroHold:
         self.rate = 0.0  # rad/s^2, the slope of the last samples
         self.last_sample_time = None
 
-    def at(self, t: float, value: float, age: float, fresh: bool) -> float:
-        """The held ``value``, sampled ``age`` s before the tick ``t`` (``fresh``: new this tick), at ``t``."""
+    def at(self, t: float, value: float, age: float) -> float:
+        """The ``value`` sampled ``age`` s before the tick ``t``, at ``t`` (a sample already seen adds no point)."""
         sample_time = t - age
-        if fresh and (self.last_sample_time is None or sample_time > self.last_sample_time):
+        if self.last_sample_time is None or sample_time > self.last_sample_time:
             self.rate = float(self.slopes.update(sample_time, [value])[0])
             self.last_sample_time = sample_time
         return value + age * self.rate
