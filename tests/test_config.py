@@ -89,7 +89,7 @@ def test_negative_mass(tmp_path):
 
 
 def test_cornering_stiffness_uncertainty_is_read_within_its_range_and_defaults_to_textbook_values(tmp_path):
-    assert load_config(CONFIG).vehicle.cornering_stiffness_uncertainty == 0.2  # the built-in car's own
+    assert load_config(CONFIG).vehicle.cornering_stiffness_uncertainty == 0.15  # the built-in car's own
     path = write_variant(tmp_path, lambda d: d["vehicle"].pop("cornering_stiffness_uncertainty"))
     assert load_config(path).vehicle.cornering_stiffness_uncertainty == 0.3
     path = write_variant(tmp_path, lambda d: d["vehicle"].update(cornering_stiffness_uncertainty=1.5))

@@ -58,6 +58,25 @@ def test_kinematic_check_sees_a_slide_the_model_misses():
     assert not slide[-1]
 
 
+def test_kinematic_mismatch_remembers_a_slide_the_model_lags_and_not_the_biases():
+    """A slide building up at 1.6 deg/s that the model follows at 0.8: inside the window's tolerance each half
+    second, yet 2 deg apart after 2.5 s. The remembered mismatch sees it; biases alone (0.13 deg/s) do not."""
+    dt, vx, yaw_rate = 0.01, 22.0, 0.2
+    biased = validity.KinematicCheck(dt)
+    bias = math.radians(0.13)  # rad/s of ay / vx - r
+    for _ in range(2000):
+        biased.inside(0.0, vx * (yaw_rate + bias), yaw_rate, vx)
+    assert math.degrees(biased.mismatch) < 0.02  # held at 0.26 deg, nearly all within the allowance
+    lagging = validity.KinematicCheck(dt)
+    truth_rate, model_rate = math.radians(-1.6), math.radians(-0.8)
+    passed, beta = [], 0.0
+    for _ in range(250):
+        beta += model_rate * dt
+        passed.append(lagging.inside(beta, vx * (yaw_rate + truth_rate), yaw_rate, vx))
+    assert all(passed)  # the window's test never fails
+    assert math.degrees(lagging.mismatch) > 2.0 / 3.0  # three std of it cover the 2 deg
+
+
 def test_lateral_drift_bounds_vx_from_a_lateral_velocity_the_model_misses():
     """dvx/dt = ax + r vy: a sideslip the model does not have moves vx at r times its lateral velocity."""
     dt, vx, yaw_rate = 0.01, 20.0, 0.2
@@ -75,6 +94,33 @@ def test_lateral_drift_bounds_vx_from_a_lateral_velocity_the_model_misses():
     assert restarted == pytest.approx(2 * yaw_rate * 2.0 * dt, rel=0.02)
     drift.update(vx * yaw_rate, yaw_rate, vx, 0.0, True, True)  # sideslip known and vx measured
     assert drift.update(vx * yaw_rate, yaw_rate, vx, 0.0, False, False) == 0.0
+
+
+def test_lateral_drift_spreads_vx_by_the_known_sideslips_own_uncertainty():
+    """A sideslip known within its std still moves an integrated vx: at r times std(vy), linearly."""
+    dt, vx, yaw_rate, lateral_std = 0.01, 20.0, -0.3, 0.3
+    drift = validity.LateralDrift(dt)
+    for _ in range(200):  # 2 s of steady cornering, the sideslip valid, the wheels not rolling freely
+        drift.update(vx * yaw_rate, yaw_rate, vx, -0.02, False, True, lateral_std)
+    assert drift.drift == 0.0  # no slide the model misses
+    assert drift.spread == pytest.approx(abs(yaw_rate) * lateral_std * 2.0, rel=0.02)
+    drift.update(vx * yaw_rate, yaw_rate, vx, -0.02, True, True, lateral_std)  # the wheels measure vx again
+    assert drift.spread == 0.0
+
+
+def test_vx_std_covers_a_steady_turn_where_the_wheels_do_not_roll_freely(config, tmp_path):
+    """The step steer on 0.85: the motors hold the speed (no free rolling), ckf's vx integrates ax + r vy with
+    a sideslip 0.9 deg off within its std, and drifted 0.4 m/s in 4 s with a std of 0.11 before the spread."""
+    sim = simulate(config, "step", 80.0, 0.85, seed=0)
+    sim.write_log(tmp_path / "step.log")
+    estimates = []
+    replay(config, tmp_path / "step.log", progress=False, on_estimate=estimates.append)
+    late = [e for e in estimates if e.t > 6.0 and e.valid.get("vx")]
+    assert late
+    errors = np.array([e.values["vx"] - np.interp(e.t, sim.truth["t"], sim.truth["vx"]) for e in late])
+    stds = np.array([e.values["vx_std"] for e in late])
+    assert np.max(np.abs(errors)) > 0.2  # the drift this test is about
+    assert np.all(np.abs(errors) < 2 * stds)
 
 
 def test_vx_of_a_car_sliding_sideways_is_not_valid_but_wrong(config, tmp_path):

@@ -274,9 +274,9 @@ class Estimator:
         index = {"yaw_rate": self.yaw, "vx": self.vx, "beta": self.beta}
         vx, beta = x[self.vx], x[self.beta]
         reference = self.reference_speed  # vx is measured unless the reference integrated ax this tick
-        drift = self.judge.drift(inputs, vx, beta, reference.last_t != t or reference.anchored_at == t)
-        std = self.judge.widen(np.sqrt(np.maximum(np.diag(self.filter.covariance), 0.0)), index, ratios,
-                               inputs.current("ay"), drift)
+        std = np.sqrt(np.maximum(np.diag(self.filter.covariance), 0.0))
+        drift = self.judge.drift(inputs, vx, beta, std[self.beta], reference.last_t != t or reference.anchored_at == t)
+        std = self.judge.widen(std, index, ratios, inputs.current("ay"), drift)
         values = {
             "vx": vx, "vy": vx * math.tan(beta), "beta": beta, "yaw_rate": x[self.yaw],
             "vx_std": std[self.vx], "vy_std": math.hypot(vx * std[self.beta] / math.cos(beta) ** 2,

@@ -71,23 +71,28 @@ class StateJudge:
     def ratios(self) -> dict:
         return {state: self.consistency.ratio(state) for state in validity.OBSERVED_BY}
 
-    def drift(self, inputs, vx: float, beta: float, vx_measured: bool) -> float:
+    def drift(self, inputs, vx: float, beta: float, beta_std: float, vx_measured: bool) -> float:
         """This tick's bound on vx's drift from an unmodelled lateral velocity (0 without ay or a gyro);
-        ``vx_measured``: the wheels measured vx this tick."""
+        ``beta_std``: the filter's sideslip std, to which the model's error is added; ``vx_measured``: the
+        wheels measured vx this tick."""
         if not inputs.has("ay", "yaw_rate"):
             self.lateral_drift.reset()
             return 0.0
-        return self.lateral_drift.update(inputs.values["ay"], inputs.values["yaw_rate"], vx, beta, vx_measured,
-                                         self.sideslip_known)
+        ay = inputs.values["ay"]
+        beta_std = math.hypot(beta_std, validity.sideslip_model_std(self.vehicle, ay, self.linear_tires))
+        return self.lateral_drift.update(ay, inputs.values["yaw_rate"], vx, beta, vx_measured, self.sideslip_known,
+                                         abs(vx) * beta_std / math.cos(beta) ** 2)
 
     def widen(self, std: np.ndarray, index: dict, ratios: dict, ay: float, drift: float = 0.0) -> np.ndarray:
         """The published std: each state's by its channels' consistency, vx with its lateral drift, sideslip with
-        its model error."""
+        its model error, and never below its last mismatch with the kinematic sideslip change."""
         std = std.copy()
         std[index["yaw_rate"]] *= validity.inflation(ratios["yaw_rate"])
-        std[index["vx"]] = math.hypot(std[index["vx"]] * validity.inflation(ratios["vx"]), drift)
-        std[index["beta"]] = math.hypot(std[index["beta"]] * validity.inflation(ratios["beta"]),
-                                        validity.sideslip_model_std(self.vehicle, ay, self.linear_tires))
+        std[index["vx"]] = math.hypot(std[index["vx"]] * validity.inflation(ratios["vx"]), drift,
+                                      self.lateral_drift.spread)
+        std[index["beta"]] = max(math.hypot(std[index["beta"]] * validity.inflation(ratios["beta"]),
+                                            validity.sideslip_model_std(self.vehicle, ay, self.linear_tires)),
+                                 self.kinematic.mismatch)
         return std
 
     def causes(self, inputs, ratios: dict, vx_std: float, lateral: dict, t: float, drift: float = 0.0) -> dict:

@@ -17,7 +17,7 @@ whatever the filter did with the gyro (the maximum-correntropy and adaptive
 filters can reweight a channel to silence): the test never sees the filter's
 own R.
 
-Published standard deviations get two terms beyond the filter's covariance:
+Published standard deviations get these terms beyond the filter's covariance:
 
 - the consistency ratio: where a state's channels show ``mean d = k > 1``,
   the prior spread explains only ``1/k`` of what is measured, so the state's
@@ -34,7 +34,11 @@ Published standard deviations get two terms beyond the filter's covariance:
   ``sin(C atan(B a)) ~ C B a - k a^3``): ``e_2`` (:data:`DEGRESSIVE_STIFFNESS`)
   makes ``e`` 0.6 at 0.65 g, the error of the simulator's Magic Formula
   tires on dry road (sideslip 1.8 deg off at 6.3 m/s^2). Models with a tire
-  curve (tire force, two track) have that term in their dynamics.
+  curve (tire force, two track) have that term in their dynamics;
+- the sideslip is never published more certain than its remembered mismatch
+  with the kinematic sideslip (:class:`KinematicCheck`), and vx's std grows
+  by ``|r|`` times the lateral velocity's std while the wheels do not measure
+  vx (:class:`LateralDrift`).
 
 Sideslip also needs the model inside its valid regime. A model with fixed
 tire friction (the single-track model's linear tires, the tire-force
@@ -98,6 +102,8 @@ REGIME_LAG = 0.15  # s, first-order lag of the steady-state yaw rate (a passenge
 REGIME_TOLERANCE = (0.035, 0.2)  # rad/s plus a share of the reference: ESC's yaw-rate deviation band
 KINEMATIC_WINDOW = 0.5  # s
 KINEMATIC_TOLERANCE = (math.radians(0.5), 0.25)  # rad plus a share of the kinematic change
+KINEMATIC_MEMORY = 2.0  # s, time constant of the sideslip's remembered mismatch with the kinematic one
+KINEMATIC_BIAS_ALLOWANCE = math.radians(0.25)  # rad of that mismatch the sensors' biases explain
 DRIFT_LIMIT = 0.5  # m/s of possible vx drift above which the car slides (vx "model_regime"; as VX_VALID_STD)
 # The channels that observe each published state (any model; a model without the channel just lacks it).
 OBSERVED_BY = {
@@ -207,19 +213,33 @@ class Holds:
 
 
 class KinematicCheck:
-    """Whether the model's sideslip changed as ``integral(ay / vx - r)`` did over the last ``KINEMATIC_WINDOW`` s."""
+    """Whether the model's sideslip changed as ``integral(ay / vx - r)`` did over the last ``KINEMATIC_WINDOW`` s.
+
+    :attr:`mismatch` (rad) is how far the model's sideslip moved away from the kinematic one, remembered over
+    ``KINEMATIC_MEMORY`` s (a leaky integral of the difference of their rates), beyond what the sensors' biases
+    explain (``KINEMATIC_BIAS_ALLOWANCE``: the simulated IMU's alone hold the difference at 0.26 deg at
+    80 km/h): evidence of the sideslip's error that the published std is never below. A slide building up on
+    0.35 outran jckf's sideslip by 0.8 deg per window, inside the tolerance, until it was 2 deg off with a std
+    of 0.62, flagged valid; in a lane change the difference swings both ways and cancels."""
 
     def __init__(self, dt: float):
         self.dt = dt
         self.history = deque(maxlen=max(2, int(round(KINEMATIC_WINDOW / dt)) + 1))
-        self.kinematic = 0.0
+        self.leak = math.exp(-dt / KINEMATIC_MEMORY)
+        self.reset()
 
     def reset(self) -> None:
         self.history.clear()
         self.kinematic = 0.0
+        self.difference = 0.0
+        self.mismatch = 0.0
 
     def inside(self, beta: float, ay: float, yaw_rate: float, vx: float) -> bool:
-        self.kinematic += (ay / vx - yaw_rate) * self.dt
+        rate = (ay / vx - yaw_rate) * self.dt
+        if self.history:
+            self.difference = self.leak * self.difference + (beta - self.history[-1][0]) - rate
+            self.mismatch = max(0.0, abs(self.difference) - KINEMATIC_BIAS_ALLOWANCE)
+        self.kinematic += rate
         self.history.append((beta, self.kinematic))
         if len(self.history) < self.history.maxlen:
             return True
@@ -237,6 +257,11 @@ class LateralDrift:
     model's, since the model's sideslip was last known (valid); the drift is ``|integral(r e)|`` since the
     wheels last measured vx (``vx_measured``: the reference speed rolled freely). A filter restart
     (:meth:`restart_model`) moves the model's sideslip, not the car's: ``e`` goes on from the restarted model.
+
+    While the sideslip is known, its error is what its std says, and a systematic one (a stiffness off, see
+    :func:`sideslip_model_std`): vx's error grows at ``r`` times the lateral velocity's std, linearly.
+    :attr:`spread` is that bound, ``integral(|r| std(vy))`` since the wheels last measured vx (the step steer
+    on 0.85 drove ckf's vx 0.4 m/s high in 4 s with a std of 0.11, a sideslip 0.9 deg off within its std).
     """
 
     def __init__(self, dt: float):
@@ -249,13 +274,15 @@ class LateralDrift:
         self.model = None  # the model's lateral velocity at the last update
         self.restarted = False
         self.drift = 0.0
+        self.spread = 0.0
 
     def restart_model(self) -> None:
         """The filter restarts: its next lateral velocity continues the mismatch ``e``."""
         self.restarted = self.known is not None
 
     def update(self, ay: float, yaw_rate: float, vx: float, beta: float, vx_measured: bool,
-               sideslip_known: bool) -> float:
+               sideslip_known: bool, lateral_std: float = 0.0) -> float:
+        """The drift bound ``|integral(r e)|`` (m/s); :attr:`spread` grows by ``|r| lateral_std dt`` (m/s)."""
         self.kinematic += (ay - yaw_rate * vx) * self.dt
         model = vx * math.tan(beta)
         if self.restarted:
@@ -266,4 +293,5 @@ class LateralDrift:
         self.model = model
         mismatch = (self.kinematic - self.known[0]) - (model - self.known[1])
         self.drift = 0.0 if vx_measured else self.drift + yaw_rate * mismatch * self.dt
+        self.spread = 0.0 if vx_measured else self.spread + abs(yaw_rate) * lateral_std * self.dt
         return abs(self.drift)
