@@ -275,8 +275,10 @@ class Estimator:
         vx, beta = x[self.vx], x[self.beta]
         reference = self.reference_speed  # vx is measured unless the reference integrated ax this tick
         std = np.sqrt(np.maximum(np.diag(self.filter.covariance), 0.0))
-        drift = self.judge.drift(inputs, vx, beta, std[self.beta], reference.last_t != t or reference.anchored_at == t)
-        std = self.judge.widen(std, index, ratios, inputs.current("ay"), drift)
+        beta_model_std = self.judge.sideslip_model_std(inputs.current("ay"))
+        drift = self.judge.drift(inputs, vx, beta, math.hypot(std[self.beta], beta_model_std),
+                                 reference.last_t != t or reference.anchored_at == t)
+        std = self.judge.widen(std, index, ratios, beta_model_std, drift)
         values = {
             "vx": vx, "vy": vx * math.tan(beta), "beta": beta, "yaw_rate": x[self.yaw],
             "vx_std": std[self.vx], "vy_std": math.hypot(vx * std[self.beta] / math.cos(beta) ** 2,

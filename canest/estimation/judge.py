@@ -71,27 +71,30 @@ class StateJudge:
     def ratios(self) -> dict:
         return {state: self.consistency.ratio(state) for state in validity.OBSERVED_BY}
 
+    def sideslip_model_std(self, ay: float) -> float:
+        """The sideslip's model error (rad) at ``ay`` (:func:`validity.sideslip_model_std`)."""
+        return validity.sideslip_model_std(self.vehicle, ay, self.linear_tires)
+
     def drift(self, inputs, vx: float, beta: float, beta_std: float, vx_measured: bool) -> float:
         """This tick's bound on vx's drift from an unmodelled lateral velocity (0 without ay or a gyro);
-        ``beta_std``: the filter's sideslip std, to which the model's error is added; ``vx_measured``: the
-        wheels measured vx this tick."""
+        ``beta_std``: the sideslip's std, the filter's with the model's error; ``vx_measured``: the wheels
+        measured vx this tick."""
         if not inputs.has("ay", "yaw_rate"):
             self.lateral_drift.reset()
             return 0.0
-        ay = inputs.values["ay"]
-        beta_std = math.hypot(beta_std, validity.sideslip_model_std(self.vehicle, ay, self.linear_tires))
-        return self.lateral_drift.update(ay, inputs.values["yaw_rate"], vx, beta, vx_measured, self.sideslip_known,
-                                         abs(vx) * beta_std / math.cos(beta) ** 2)
+        return self.lateral_drift.update(inputs.values["ay"], inputs.values["yaw_rate"], vx, beta, vx_measured,
+                                         self.sideslip_known, abs(vx) * beta_std / math.cos(beta) ** 2)
 
-    def widen(self, std: np.ndarray, index: dict, ratios: dict, ay: float, drift: float = 0.0) -> np.ndarray:
+    def widen(self, std: np.ndarray, index: dict, ratios: dict, beta_model_std: float,
+              drift: float = 0.0) -> np.ndarray:
         """The published std: each state's by its channels' consistency, vx with its lateral drift, sideslip with
-        its model error, and never below its last mismatch with the kinematic sideslip change."""
+        its model error (``beta_model_std``, :meth:`sideslip_model_std`), and never below its last mismatch
+        with the kinematic sideslip change."""
         std = std.copy()
         std[index["yaw_rate"]] *= validity.inflation(ratios["yaw_rate"])
         std[index["vx"]] = math.hypot(std[index["vx"]] * validity.inflation(ratios["vx"]), drift,
                                       self.lateral_drift.spread)
-        std[index["beta"]] = max(math.hypot(std[index["beta"]] * validity.inflation(ratios["beta"]),
-                                            validity.sideslip_model_std(self.vehicle, ay, self.linear_tires)),
+        std[index["beta"]] = max(math.hypot(std[index["beta"]] * validity.inflation(ratios["beta"]), beta_model_std),
                                  self.kinematic.mismatch)
         return std
 
