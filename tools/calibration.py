@@ -11,7 +11,7 @@ The simulated car differs from the config as issue 17 says (front stiffness x0.7
 rate and vx of a replay of each road with the wrong, the calibrated and the true config.
 
 ``--online``: one country road (seed 3, ``--bank``) through the pipeline as the daemon runs it; each parameter's
-true, configured and learned value (std, * once converged and applied) at 30, 60 and 120 s, then the RMSE after
+true, configured and learned value (std, * once converged) at 30, 60 and 120 s, then the RMSE after
 60 s of a replay with the online calibration, without it, and with the true parameters in the config (the
 bank, which no config holds, left out) (README "Online calibration").
 """
@@ -144,7 +144,8 @@ def online(config, duration: float, bank_deg: float, workdir: Path) -> None:
                      f"{(got - true) * factor:+.3f} ({bound} {unit})")
         print(f"{name:<16} {unit:<6} {true * factor:>9.4f} {start[name] * factor:>9.4f} " + " ".join(cells) + "  "
               + error)
-    print("* converged: applied to the estimator's inputs (rate-limited)")
+    print("* converged (std below its threshold after 30 s of excitation); corrections are applied, rate-limited, "
+          "from 10 s of excitation, the steering and lateral offsets from the steering offset's convergence")
     print(f"cost: {1e6 * np.mean(seconds[1:]):.1f} us per tick on average, {1e6 * np.percentile(seconds[1:], 99):.1f} "
           f"us at the 99th percentile, CPU time of this thread ({len(seconds) - 1} ticks)")
     print(f"\nRMSE after 60 s {'':<14}" + " ".join(f"{s:>9}" for s in STATES) + "   (deg, deg/s, m/s)")

@@ -25,13 +25,13 @@ def parameters(vehicle: VehicleParams) -> tuple:
     """The learned parameters; the understeer gradient starts at the config's."""
     deg = math.radians(1.0)
     return (
-        Learned("speed", 1.0, 0.03, 0.8, 1.25, 0.001, 0.005, 0.002),
-        Learned("gyro_bias", 0.0, 0.5 * deg, -5.0 * deg, 5.0 * deg, 0.01 * deg, 0.15 * deg, 0.02 * deg),
-        Learned("ay_bias", 0.0, 0.3, -2.0, 2.0, 0.01, 0.05, 0.02),
-        Learned("steering_offset", 0.0, 2.0 * deg, -30.0 * deg, 30.0 * deg, 0.05 * deg, 0.2 * deg, 0.2 * deg),
-        Learned("ratio", 1.0, 0.1, 0.5, 2.0, 0.002, 0.03, 0.005),
+        Learned("speed", 1.0, 0.03, 0.8, 1.25, 0.001, 0.005, 0.01),
+        Learned("gyro_bias", 0.0, 0.5 * deg, -5.0 * deg, 5.0 * deg, 0.01 * deg, 0.15 * deg, 0.1 * deg),
+        Learned("ay_bias", 0.0, 0.3, -2.0, 2.0, 0.01, 0.05, 0.1),
+        Learned("steering_offset", 0.0, 2.0 * deg, -30.0 * deg, 30.0 * deg, 0.05 * deg, 0.2 * deg, 1.0 * deg),
+        Learned("ratio", 1.0, 0.1, 0.5, 2.0, 0.002, 0.03, 0.025),
         Learned("understeer", vehicle.understeer_gradient, 0.003, -0.01, 0.02, 0.0001, 0.0005, 0.0),
-        Learned("ax_bias", 0.0, 0.3, -2.0, 2.0, 0.01, 0.03, 0.02),
+        Learned("ax_bias", 0.0, 0.3, -2.0, 2.0, 0.01, 0.03, 0.1),
     )
 
 
