@@ -16,13 +16,18 @@ import numpy as np
 from canest.codec.decode import InputDecoder
 from canest.errors import ConfigError, LogError
 from canest.estimation.inputs import WHEEL_SPEEDS, TickInputs
+from canest.estimation.reference_speed import slip_free_speed, tire_usage
 from canest.io.logfiles import open_log
+from canest.models.wheels import WheelGeometry
+from canest.params import VehicleParams
 from canest.resample import Resampler, TickClock
 from canest.settings import Config
+from canest.signals import INPUT_GROUPS
 
 STEP = 0.02  # s: 50 Hz, fast enough for a car's yaw dynamics (eigenvalues below 15 1/s at 50-100 km/h)
 MIN_SPEED = 8.0  # m/s: slower, the slip angles are large and the linear single-track model does not hold
 NEEDED = ("steering_wheel_angle", "yaw_rate", "ay", *WHEEL_SPEEDS)
+TORQUES = INPUT_GROUPS["motor_torques"]
 LOG = logging.getLogger("canest.calibrate")
 MIN_SEGMENT = 2.0  # s: shorter stretches of usable driving are left out (their start transient is all they hold)
 
@@ -36,7 +41,7 @@ class Drive:
     steering_wheel_angle: np.ndarray  # rad
     yaw_rate: np.ndarray  # rad/s
     ay: np.ndarray  # m/s^2
-    wheel_speed: np.ndarray  # m/s: mean of the four wheels times the config's wheel radius
+    wheel_speed: np.ndarray  # m/s: mean of the four wheels times the config's wheel radius (:func:`wheel_speed`)
     starts: np.ndarray  # bool: the first tick of a stretch
 
     @property
@@ -51,12 +56,24 @@ def check_signals(config: Config) -> None:
         raise ConfigError(f"{config.path}: input.signals: calibration needs {', '.join(missing)}; map them")
 
 
+def wheel_speed(inputs: TickInputs, geometry: WheelGeometry, vehicle: VehicleParams) -> float:
+    """The four wheels' mean speed, without the slip their motors' torques need where all four are in (as the
+    estimator's reference speed takes it: the radius is then fitted to the same speed the estimator uses)."""
+    if not inputs.has(*TORQUES):
+        return inputs.wheel_speed(vehicle.wheel_radius)
+    usage = tire_usage([inputs.values[name] for name in TORQUES],
+                       geometry.loads(inputs.current("ax"), inputs.values["ay"]), vehicle.wheel_radius)
+    return slip_free_speed([inputs.values[name] for name in WHEEL_SPEEDS], usage, vehicle.wheel_radius,
+                           vehicle.tire.longitudinal_stiffness)
+
+
 def read_drive(config: Config, path, log_format=None, log_channel=None) -> Drive:
     """The log's usable ticks; a LogError (65) naming the log when it holds too little driving to fit.
     What the reader could not read is a warning naming the log, as in a replay."""
     decoder = InputDecoder(config)
     resampler = Resampler(config.signals, decoder.timeouts(config.estimator.timeout_cycles))
     clock = TickClock(STEP)
+    geometry = WheelGeometry(config.vehicle)
     rows, previous_tick = [], None
     source = open_log(path, log_format, log_channel)
     frames = iter(source)
@@ -64,11 +81,10 @@ def read_drive(config: Config, path, log_format=None, log_channel=None) -> Drive
         for msg in frames:
             for tick in clock.due(msg.timestamp):
                 inputs = TickInputs(resampler.sample(tick))
-                usable = inputs.has(*NEEDED) and inputs.wheel_speed(config.vehicle.wheel_radius) >= MIN_SPEED
-                if usable:
+                speed = wheel_speed(inputs, geometry, config.vehicle) if inputs.has(*NEEDED) else 0.0
+                if speed >= MIN_SPEED:
                     start = previous_tick is None or tick - previous_tick > 1.5 * STEP
-                    rows.append((tick, *(inputs.values[name] for name in NEEDED[:3]),
-                                 inputs.wheel_speed(config.vehicle.wheel_radius), start))
+                    rows.append((tick, *(inputs.values[name] for name in NEEDED[:3]), speed, start))
                     previous_tick = tick
             values = decoder.decode(msg)
             for name, value in values or ():

@@ -47,7 +47,7 @@ from canest.estimation.estimate import OUTPUT_STATES, Estimate
 from canest.estimation.gyro_hold import GyroHold
 from canest.estimation.inputs import WHEEL_SPEEDS, TickInputs
 from canest.estimation.judge import DIVERGENCE_NIS, StateJudge
-from canest.estimation.reference_speed import ReferenceSpeed
+from canest.estimation.reference_speed import ReferenceSpeed, tire_usage
 from canest.estimation.steering_zero import steering_zero
 from canest.filters import Transition, make_filter
 from canest.filters.base import central_difference_jacobian
@@ -174,8 +174,7 @@ class Estimator:
         speeds = [inputs.values[name] for name in WHEEL_SPEEDS]
         ax, ay = inputs.current("ax"), inputs.current("ay")
         loads = self.geometry.loads(ax, ay).tolist()
-        usage = [inputs.values.get(torque, 0.0) / (self.vehicle.wheel_radius * max(load, 1.0))
-                 for torque, load in zip(TORQUES, loads)]
+        usage = tire_usage([inputs.values.get(torque, 0.0) for torque in TORQUES], loads, self.vehicle.wheel_radius)
         beta, vx = self.filter.x[self.beta], self.filter.x[self.vx]
         accelerations = self.reference_wheel_acceleration.update(t, speeds).tolist()
         return self.reference_speed.update(t, ax + inputs.current("yaw_rate") * vx * math.tan(beta), speeds,

@@ -11,7 +11,8 @@ averaged: their noise shrinks, and the learner costs a few microseconds a
 tick). Each update is one identity of :mod:`canest.models.identities`, used
 only when the drive excites it and the car is steady enough for it to hold:
 
-- ``kinematic`` (speed above ``MIN_SPEED``, steady yaw rate): ``ay_m = s v_w (r_m - b_r) + c``
+- ``kinematic`` (speed above ``MIN_SPEED``, steady yaw rate): ``ay_m = s v_w (r_m - b_r) + c`` (``v_w`` the
+  wheels' speed without their motors' slip, :mod:`canest.estimation.calibration_blocks`)
   observes the speed scale ``speed`` (the effective wheel radius over the configured one), the gyro bias
   ``gyro_bias`` and the lateral offset ``ay_bias`` (the accelerometer's bias plus the mean bank's
   ``-g sin(bank)``: no sensor here tells them apart);
@@ -92,7 +93,7 @@ class OnlineCalibration:
         self._report = None  # built by report() once per block
         self.index = {name: i for i, name in enumerate(names)}
         self.enabled = enabled and all(name in self.index for name in NEEDED)
-        self.blocks = BlockMeans(names, vehicle.wheel_radius, max(1, round(BLOCK / dt))) if self.enabled else None
+        self.blocks = BlockMeans(names, vehicle, max(1, round(BLOCK / dt))) if self.enabled else None
         self.history = deque(maxlen=HISTORY + 1)
         self.store = store
         self.last_save = None

@@ -32,6 +32,19 @@ DRIFT = 0.1  # m/s per s of integration
 MAX_GAP = 0.1  # s without inputs after which the wheels are taken again
 
 
+def tire_usage(torques, loads, wheel_radius: float) -> list:
+    """Per wheel ``T / (R Fz)``: the share of its load a wheel's motor torque asks of its tire (loads floored at
+    1 N)."""
+    return [torque / (wheel_radius * max(load, 1.0)) for torque, load in zip(torques, loads)]
+
+
+def slip_free_speed(wheel_speeds, usage, wheel_radius: float, slip_stiffness: float) -> float:
+    """The mean wheel-centre speed without the slip the wheels' forces need: ``R mean(w / (1 + usage / k))``,
+    ``k`` the tire's longitudinal slip stiffness per unit load (a linear tire: ``Fx / Fz = k s``,
+    ``s = (R w - v) / v``)."""
+    return wheel_radius * sum(w / (1.0 + x / slip_stiffness) for w, x in zip(wheel_speeds, usage)) / len(wheel_speeds)
+
+
 class ReferenceSpeed:
     def __init__(self, wheel_radius: float, slip_stiffness: float, anchored_std: float):
         self.wheel_radius = wheel_radius
@@ -55,8 +68,7 @@ class ReferenceSpeed:
         free = (all(abs(x) < FREE_ROLLING_USAGE for x in usage)
                 and all(abs(radius * a - acceleration) < WHEEL_ACCELERATION_TOLERANCE for a in wheel_accelerations))
         if free or self.speed is None or t - self.last_t > MAX_GAP:
-            self.speed = radius * sum(w / (1.0 + x / self.slip_stiffness) for w, x in zip(wheel_speeds, usage)) \
-                / len(wheel_speeds)
+            self.speed = slip_free_speed(wheel_speeds, usage, radius, self.slip_stiffness)
             self.anchored_at = t
         else:
             self.speed += acceleration * (t - self.last_t)
