@@ -390,3 +390,23 @@ def test_check_names_the_factorization_the_filter_really_runs(name, tmp_path, ca
         assert found["factorization"] == runs in ("cholesky", "svd")
         assert f"{name} ({runs} square root of P) on model {found['model']}" in line
     assert "None" not in line and found["name"] == name
+
+
+def test_vx_from_ax_defaults_to_a_configs_own_vx_noise(tmp_path):
+    """``vx_from_ax`` (the noise of a vx that integrates ax) is the built-in 0.1 where a config sets neither, what a
+    config says, and a config's ``vx`` where it sets only that (written before the two were told apart)."""
+    def noise(edit):
+        return load_config(write_variant(tmp_path, edit)).estimator.process_noise
+
+    def only_vx(data):
+        data["estimator"]["process_noise"] = {"vx": 0.4}
+
+    def neither(data):
+        data["estimator"].pop("process_noise")
+
+    def both(data):
+        data["estimator"]["process_noise"] = {"vx": 0.4, "vx_from_ax": 0.05}
+
+    assert noise(only_vx)["vx_from_ax"] == 0.4
+    assert noise(neither)["vx_from_ax"] == 0.1 and noise(neither)["vx"] == 0.3
+    assert (noise(both)["vx"], noise(both)["vx_from_ax"]) == (0.4, 0.05)

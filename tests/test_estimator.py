@@ -1,4 +1,5 @@
 """The CKF on the 3-DOF model against the simulator's truth, and its guards."""
+import dataclasses
 import math
 
 import numpy as np
@@ -6,6 +7,7 @@ import pytest
 
 from canest.codec.encode import InputEncoder
 from canest.apps.evaluate import read_table, score
+from canest.estimation.catalog import make_estimator
 from canest.pipeline import Pipeline
 from canest.apps.replay import replay
 from canest.sim.simulate import simulate
@@ -138,3 +140,15 @@ def test_a_consistent_run_never_resets(config, dlc_run):
     for frame in sim.frames:
         pipeline.feed(frame)
     assert pipeline.estimator.resets == 0 and "resets_per_hour" not in pipeline.summary()
+
+
+def test_vx_process_noise_follows_what_drives_the_models_vx(config):
+    """The single track integrates the measured ax (its vx noise is the accelerometer's, ``vx_from_ax``); the
+    two track's vx follows its tires' forces (``vx``)."""
+    noise = config.estimator.process_noise
+    assert noise["vx_from_ax"] < noise["vx"]
+    single = make_estimator(config)
+    assert single.Q[single.vx, single.vx] == pytest.approx(noise["vx_from_ax"] ** 2 * single.dt)
+    two_track_config = dataclasses.replace(config.estimator, filter="jckf", model="two_track")
+    two_track = make_estimator(dataclasses.replace(config, estimator=two_track_config))
+    assert two_track.Q[two_track.vx, two_track.vx] == pytest.approx(noise["vx"] ** 2 * two_track.dt)

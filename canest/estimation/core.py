@@ -90,7 +90,8 @@ class Estimator:
         self.model = model
         self.dt = 1.0 / self.est.rate_hz
         names = [noise_key(n) for n in model.state_names]
-        self.Q = np.diag(np.array([self.est.process_noise[n] for n in names]) ** 2 * self.dt)  # per tick
+        driven = [getattr(model, "vx_noise_key", "vx") if name == "vx" else name for name in names]
+        self.Q = np.diag(np.array([self.est.process_noise[n] for n in driven]) ** 2 * self.dt)  # per tick
         self.p0 = np.diag(np.array([self.est.initial_std[n] for n in names]) ** 2)
         self.derived_ax = derived_ax(config)
         noise = {**self.est.measurement_noise, **self.derived_ax.noise}

@@ -60,6 +60,7 @@ class SingleTrackModel:
     measurement_names = MEASUREMENT_NAMES
     input_parameter = 2  # u[2]: the scale theta of both cornering stiffnesses (a dual filter estimates it)
     linear_tires = True  # no tire saturation: the published sideslip std adds the degressive stiffness error
+    vx_noise_key = "vx_from_ax"  # vx integrates the measured ax (eq 3): its process noise is the accelerometer's
 
     def __init__(self, vehicle: VehicleParams):
         self.vehicle = vehicle

@@ -121,6 +121,7 @@ class AxDrivenTireForceModel(TireForceModel):
     """
 
     measurement_names = tuple(name for name in MEASUREMENT_NAMES if not name.startswith("ax"))
+    vx_noise_key = "vx_from_ax"  # its Fx sum is m ax: vx integrates the measured ax, as the single track's
     sensor_sets = tuple(s for name, s in zip(MEASUREMENT_NAMES, SENSOR_SETS) if not name.startswith("ax"))
     KEPT = np.array([MEASUREMENT_NAMES.index(name) for name in measurement_names])
 
