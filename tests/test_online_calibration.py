@@ -223,6 +223,19 @@ def test_gyro_bias_is_learned_at_a_standstill(config):
     assert calibration.updates["standstill"] > 500 and calibration.updates["kinematic"] == 0
 
 
+def test_an_accelerometer_reading_high_in_acceleration_teaches_the_ax_offset_not_the_speed_scale(config):
+    """A pitching car's ax reads a few percent above the wheels' dv/dt: the longitudinal identity learns the
+    difference as the ax offset and leaves the speed scale (the kinematic identity's) alone."""
+    calibration = OnlineCalibration(config.vehicle, NAMES_IN, 0.01)
+    radius = config.vehicle.wheel_radius
+    for k in range(3000):  # 30 s, 8 -> 38 m/s at 1 m/s^2 by the wheels, 1.03 m/s^2 by the accelerometer
+        t = k * 0.01
+        calibration.correct(sample(t, ax=1.03, wheel=(8.0 + t) / radius))
+    assert calibration.updates["longitudinal"] > 200
+    assert calibration.x[NAMES.index("speed")] == 1.0
+    assert calibration.x[NAMES.index("ax_bias")] == pytest.approx(0.03, abs=0.01)
+
+
 def test_a_block_with_a_stale_input_teaches_nothing(config):
     calibration = OnlineCalibration(config.vehicle, NAMES_IN, 0.01)
     for k in range(3000):
