@@ -16,18 +16,16 @@ import numpy as np
 from canest.codec.decode import InputDecoder
 from canest.errors import ConfigError, LogError
 from canest.estimation.inputs import WHEEL_SPEEDS, TickInputs
-from canest.estimation.reference_speed import slip_free_speed, tire_usage
+from canest.estimation.reference_speed import TORQUES, slip_free_speed, tick_usage
 from canest.io.logfiles import open_log
 from canest.models.wheels import WheelGeometry
 from canest.params import VehicleParams
 from canest.resample import Resampler, TickClock
 from canest.settings import Config
-from canest.signals import INPUT_GROUPS
 
 STEP = 0.02  # s: 50 Hz, fast enough for a car's yaw dynamics (eigenvalues below 15 1/s at 50-100 km/h)
 MIN_SPEED = 8.0  # m/s: slower, the slip angles are large and the linear single-track model does not hold
 NEEDED = ("steering_wheel_angle", "yaw_rate", "ay", *WHEEL_SPEEDS)
-TORQUES = INPUT_GROUPS["motor_torques"]
 LOG = logging.getLogger("canest.calibrate")
 MIN_SEGMENT = 2.0  # s: shorter stretches of usable driving are left out (their start transient is all they hold)
 
@@ -61,9 +59,8 @@ def wheel_speed(inputs: TickInputs, geometry: WheelGeometry, vehicle: VehiclePar
     estimator's reference speed takes it: the radius is then fitted to the same speed the estimator uses)."""
     if not inputs.has(*TORQUES):
         return inputs.wheel_speed(vehicle.wheel_radius)
-    usage = tire_usage([inputs.values[name] for name in TORQUES],
-                       geometry.loads(inputs.current("ax"), inputs.values["ay"]), vehicle.wheel_radius)
-    return slip_free_speed([inputs.values[name] for name in WHEEL_SPEEDS], usage, vehicle.wheel_radius,
+    return slip_free_speed([inputs.values[name] for name in WHEEL_SPEEDS],
+                           tick_usage(inputs, geometry, vehicle.wheel_radius), vehicle.wheel_radius,
                            vehicle.tire.longitudinal_stiffness)
 
 

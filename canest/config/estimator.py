@@ -28,10 +28,9 @@ def read_estimator(doc: Document) -> EstimatorConfig:
         doc.reject_unknown(key_path + (name,), given, keys)
         values[name] = {**getattr(defaults, name), **{k: doc.number(key_path + (name,), given, k, limits.NOISE)
                                                        for k in given}}
-    process_noise = doc.section(key_path + ("process_noise",), required=False)
-    if "vx" in process_noise and "vx_from_ax" not in process_noise:
-        # written before the two were told apart, a config's vx noise is meant for every model: it keeps that meaning
-        values["process_noise"]["vx_from_ax"] = values["process_noise"]["vx"]
+        if name == "process_noise" and "vx" in given and "vx_from_ax" not in given:
+            # a vx noise written before vx_from_ax existed is meant for every model: it keeps that meaning
+            values[name]["vx_from_ax"] = values[name]["vx"]
     compensation = _flag(doc, section, "latency_compensation", defaults.latency_compensation)
     online_calibration = _flag(doc, section, "online_calibration", defaults.online_calibration)
     state_file = _state_file(doc, section)

@@ -15,10 +15,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from canest.estimation.inputs import WHEEL_SPEEDS
-from canest.estimation.reference_speed import slip_free_speed, tire_usage
+from canest.estimation.reference_speed import TORQUES, slip_free_speed, tire_usage
 from canest.models.wheels import WheelGeometry
 from canest.params import VehicleParams
-from canest.signals import INPUT_GROUPS
 
 
 @dataclass
@@ -41,13 +40,14 @@ class BlockMeans:
         self.others = [index[n] for n in ("yaw_rate", "ay", "steering_wheel_angle")]
         self.ax = index.get("ax")
         self.used = self.wheels + self.others + ([self.ax] if self.ax is not None else [])
-        torques = [index.get(name) for name in INPUT_GROUPS["motor_torques"]]
+        torques = [index.get(name) for name in TORQUES]
         self.torques = torques if self.ax is not None and None not in torques else []  # summed, never required
+        self.summed = self.used + self.torques
         self.geometry = WheelGeometry(vehicle)
         self.slip_stiffness = vehicle.tire.longitudinal_stiffness
         self.radius = vehicle.wheel_radius
         self.ticks = ticks
-        self.sums = np.zeros(len(self.used) + len(self.torques))
+        self.sums = np.zeros(len(self.summed))
         self.count = 0
         self.broken = False
 
@@ -57,7 +57,7 @@ class BlockMeans:
         if sample.stale[used].any() or sample.saturated[used].any():
             self.broken = True
         else:
-            self.sums += sample.values[used + self.torques]
+            self.sums += sample.values[self.summed]
         self.count += 1
         if self.count < self.ticks:
             return None

@@ -47,16 +47,14 @@ from canest.estimation.estimate import OUTPUT_STATES, Estimate
 from canest.estimation.gyro_hold import GyroHold
 from canest.estimation.inputs import WHEEL_SPEEDS, TickInputs
 from canest.estimation.judge import DIVERGENCE_NIS, StateJudge
-from canest.estimation.reference_speed import ReferenceSpeed, tire_usage
+from canest.estimation.reference_speed import ReferenceSpeed, tick_usage
 from canest.estimation.steering_zero import steering_zero
 from canest.filters import Transition, make_filter
 from canest.filters.base import central_difference_jacobian
 from canest.models.wheel_force import WheelAcceleration
 from canest.models.wheels import WheelGeometry
 from canest.settings import Config
-from canest.signals import INPUT_GROUPS
 
-TORQUES = INPUT_GROUPS["motor_torques"]
 GYROS = ("yaw_rate", "yaw_rate_2")  # measurement channels read straight from a gyro
 
 log = logging.getLogger("canest.estimator")
@@ -173,13 +171,11 @@ class Estimator:
         if not inputs.has(*WHEEL_SPEEDS, "ax"):
             return None
         speeds = [inputs.values[name] for name in WHEEL_SPEEDS]
-        ax, ay = inputs.current("ax"), inputs.current("ay")
-        loads = self.geometry.loads(ax, ay).tolist()
-        usage = tire_usage([inputs.values.get(torque, 0.0) for torque in TORQUES], loads, self.vehicle.wheel_radius)
+        usage = tick_usage(inputs, self.geometry, self.vehicle.wheel_radius)
         beta, vx = self.filter.x[self.beta], self.filter.x[self.vx]
         accelerations = self.reference_wheel_acceleration.update(t, speeds).tolist()
-        return self.reference_speed.update(t, ax + inputs.current("yaw_rate") * vx * math.tan(beta), speeds,
-                                           accelerations, usage)
+        acceleration = inputs.current("ax") + inputs.current("yaw_rate") * vx * math.tan(beta)
+        return self.reference_speed.update(t, acceleration, speeds, accelerations, usage)
 
     def _derived(self, inputs: TickInputs, t: float, lateral_ok: bool) -> dict:
         """Channels computed from the inputs this tick: name -> (value, standard deviation, age).

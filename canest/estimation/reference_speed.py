@@ -26,6 +26,9 @@ from __future__ import annotations
 
 import math
 
+from canest.signals import INPUT_GROUPS
+
+TORQUES = INPUT_GROUPS["motor_torques"]
 FREE_ROLLING_USAGE = 0.1  # |Fx| / Fz below which a tire is in its linear range
 WHEEL_ACCELERATION_TOLERANCE = 0.5  # m/s^2 between R dw/dt and the measured ax
 DRIFT = 0.1  # m/s per s of integration
@@ -36,6 +39,13 @@ def tire_usage(torques, loads, wheel_radius: float) -> list:
     """Per wheel ``T / (R Fz)``: the share of its load a wheel's motor torque asks of its tire (loads floored at
     1 N)."""
     return [torque / (wheel_radius * max(load, 1.0)) for torque, load in zip(torques, loads)]
+
+
+def tick_usage(inputs, geometry, wheel_radius: float) -> list:
+    """:func:`tire_usage` of one tick (:class:`canest.estimation.inputs.TickInputs`): its motor torques (0 where
+    not mapped) at the loads of its ax and ay (``geometry``: a :class:`canest.models.wheels.WheelGeometry`)."""
+    loads = geometry.loads(inputs.current("ax"), inputs.current("ay")).tolist()
+    return tire_usage([inputs.values.get(torque, 0.0) for torque in TORQUES], loads, wheel_radius)
 
 
 def slip_free_speed(wheel_speeds, usage, wheel_radius: float, slip_stiffness: float) -> float:

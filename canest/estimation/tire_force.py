@@ -18,12 +18,12 @@ from canest.estimation.channels import rows_of
 from canest.estimation import validity
 from canest.estimation.core import Estimator
 from canest.estimation.inputs import WHEEL_SPEEDS, TickInputs
+from canest.estimation.reference_speed import TORQUES
 from canest.models import tire_force
 from canest.models.tire_force import AxDrivenTireForceModel, TireForceModel
 from canest.models.wheel_force import WheelAcceleration, longitudinal_forces
-from canest.signals import INPUT_GROUPS, WHEELS
+from canest.signals import WHEELS
 
-TORQUES = INPUT_GROUPS["motor_torques"]
 LATERAL_FORCES = tuple(f"fy_{w}" for w in WHEELS)
 
 
