@@ -9,6 +9,8 @@ import sys
 
 import pytest
 
+from canest.config import load_config
+from canest.sim.mismatch import PlantMismatch, drawn_mismatch
 from tests.conftest import CONFIG, ROOT
 
 sys.path.insert(0, str(ROOT / "tools"))
@@ -73,3 +75,15 @@ def test_friction_disagreeing_with_the_measured_forces_is_not_valid(vibrating, n
         assert not score.vbw > 0.001, (name, score)
         assert score.valid < 0.05, (name, score)
     assert vibrating[name]["yaw_rate"].wrong_sign == 0
+
+
+def test_a_drawn_car_grid_drives_one_car_per_seed_as_wrong_as_the_config_admits():
+    """``--car drawn``: the drives are cached apart from the exact car's, and each seed's is its own car."""
+    vehicle = load_config(CONFIG).vehicle
+    drawn = honesty.cases_of(honesty.parse_args(["--maneuvers", "sine,step", "--car", "drawn", "--seeds", "2"]))
+    exact = honesty.cases_of(honesty.parse_args(["--maneuvers", "sine,step", "--seeds", "2"]))
+    assert {case.key for case in drawn}.isdisjoint(case.key for case in exact)
+    for case in drawn:
+        assert case.mismatch(vehicle) == drawn_mismatch(vehicle, case.seed) != PlantMismatch()
+    assert len({case.mismatch(vehicle) for case in drawn}) == 2  # one car per seed, whatever the maneuver
+    assert all(case.mismatch(vehicle) == PlantMismatch() for case in exact)

@@ -1,10 +1,11 @@
-"""The simulator's launch maneuver (longitudinal excitation bounded by traction control) and friction jump."""
+"""The simulator's launch maneuver (longitudinal excitation bounded by traction control), friction jump and drawn cars."""
 import numpy as np
 import pytest
 
 from canest.commands.simulate import parse_mu_jump
 from canest.signals import WHEELS
 from canest.sim.maneuvers import Driver
+from canest.sim.mismatch import DRAWN_AY_BIAS, DRAWN_GYRO_BIAS, STIFFNESS_SCALE_LIMITS, drawn_mismatch
 from canest.sim.simulate import simulate
 
 
@@ -34,3 +35,23 @@ def test_friction_jump_option_is_checked():
     with pytest.raises(ValueError, match="--mu: expected one or four values"):
         parse_mu_jump("6:2.5")
     assert parse_mu_jump("6:0.35") == (6.0, 0.35)
+
+
+def test_a_drawn_car_is_as_wrong_as_its_config_admits(config):
+    """The honesty grid's ``--car drawn``: per seed one car, its axles' cornering stiffnesses spread by the config's
+    ``cornering_stiffness_uncertainty``, its accelerometer and gyro biased as production sensors are."""
+    cars = [drawn_mismatch(config.vehicle, seed) for seed in range(400)]
+    assert drawn_mismatch(config.vehicle, 7) == cars[7] and cars[7] != cars[8]
+    for axle in ("front", "rear"):
+        scales = np.array([getattr(car, f"stiffness_scale_{axle}") for car in cars])
+        assert np.mean(scales) == pytest.approx(1.0, abs=0.03)
+        assert np.std(scales) == pytest.approx(config.vehicle.cornering_stiffness_uncertainty, rel=0.15)
+        assert np.all((STIFFNESS_SCALE_LIMITS[0] <= scales) & (scales <= STIFFNESS_SCALE_LIMITS[1]))
+    assert np.std([car.ay_bias for car in cars]) == pytest.approx(DRAWN_AY_BIAS, rel=0.15)
+    assert np.std([car.gyro_bias for car in cars]) == pytest.approx(DRAWN_GYRO_BIAS, rel=0.15)
+    front = np.array([car.stiffness_scale_front for car in cars])
+    rear = np.array([car.stiffness_scale_rear for car in cars])
+    assert abs(np.corrcoef(front, rear)[0, 1]) < 0.15  # the two axles' tires are off independently
+    plant = simulate(config, "step", 60.0, 0.85, duration=2.0, mismatch=cars[0]).truth
+    exact = simulate(config, "step", 60.0, 0.85, duration=2.0).truth
+    assert not np.allclose(plant["beta"], exact["beta"])  # the drawn car drives differently

@@ -5,6 +5,7 @@
     python tools/honesty.py --small --filters all                 # 2 maneuvers x 2 frictions x 1 seed, 4 s each
     python tools/honesty.py --filters all --seeds 3 --json > honesty.json
     python tools/honesty.py --filters ckf,jckf --vibration 1     # the IMU vibrating as on a real car
+    python tools/honesty.py --filters all --seeds 3 --car drawn   # each seed a car as wrong as its config admits
 
 For every case of maneuvers x speeds x frictions x noise seeds it simulates
 one drive (cached in ``--workdir``), replays it with every filter (each on
@@ -36,6 +37,7 @@ from canest.apps.replay import replay  # noqa: E402
 from canest.config import DEFAULT_CONFIG, load_config  # noqa: E402
 from canest.filters import FILTERS  # noqa: E402
 from canest.errors import SimulationError  # noqa: E402
+from canest.sim.mismatch import PlantMismatch, drawn_mismatch  # noqa: E402
 from canest.sim.simulate import simulate  # noqa: E402
 
 SKIP = 0.5  # s of filter convergence left out, as canest evaluate
@@ -51,11 +53,16 @@ class Case:
     seed: int
     duration: float | None = None  # s; None: the maneuver's own
     vibration: float = 0.0  # scale of the IMU's body vibration and road spikes (canest.sim.sensors; 0 none)
+    car: str = "exact"  # "exact": the config's car; "drawn": per seed, one as wrong as the config admits
+
+    def mismatch(self, vehicle) -> PlantMismatch:
+        return drawn_mismatch(vehicle, self.seed) if self.car == "drawn" else PlantMismatch()
 
     @property
     def key(self) -> str:
         length = f"-{self.duration:g}s" if self.duration else ""
-        return f"{self.maneuver}-{self.speed:g}kmh-mu{self.mu:g}-s{self.seed}{length}-vib{self.vibration:g}"
+        car = "" if self.car == "exact" else f"-{self.car}"
+        return f"{self.maneuver}-{self.speed:g}kmh-mu{self.mu:g}-s{self.seed}{length}-vib{self.vibration:g}{car}"
 
 
 def drive(config, case: Case, workdir: Path):
@@ -64,7 +71,7 @@ def drive(config, case: Case, workdir: Path):
     if not truth.exists():
         try:
             sim = simulate(config, case.maneuver, case.speed, case.mu, seed=case.seed, duration=case.duration,
-                           vibration=case.vibration)
+                           vibration=case.vibration, mismatch=case.mismatch(config.vehicle))
         except SimulationError:
             return None
         sim.write_log(log)
@@ -139,7 +146,7 @@ def _pct(share: float) -> str:
 
 def cases_of(args) -> list:
     split = (lambda text: [p.strip() for p in str(text).split(",") if p.strip()])
-    return [Case(m, float(v), float(mu), seed, args.duration, args.vibration) for m in split(args.maneuvers)
+    return [Case(m, float(v), float(mu), seed, args.duration, args.vibration, args.car) for m in split(args.maneuvers)
             for v in split(args.speed) for mu in split(args.mu) for seed in range(args.seeds)]
 
 
@@ -154,6 +161,10 @@ def parse_args(argv=None):
     p.add_argument("--vibration", type=float, default=0.0,
                    help="IMU body vibration and road spikes, scale (default 0: white noise; 1: as on a real car, "
                         "README 'How far to trust the output')")
+    p.add_argument("--car", choices=("exact", "drawn"), default="exact",
+                   help="exact: the simulated car is the config's (default); drawn: each seed drives a car as wrong as "
+                        "the config admits (cornering stiffnesses off by its cornering_stiffness_uncertainty, "
+                        "accelerometer and gyro biases: canest.sim.mismatch.drawn_mismatch)")
     p.add_argument("--config", default=str(DEFAULT_CONFIG), help="vehicle config (default: the built-in one)")
     p.add_argument("--workdir", default="honesty-work", help="cache of simulated drives (default ./honesty-work)")
     p.add_argument("--jobs", type=int, default=1, help="cases in parallel processes (default 1)")

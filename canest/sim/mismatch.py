@@ -10,7 +10,8 @@ the car's x axis, positive when the road falls to the left, so that gravity
 pulls the car to the left with ``g sin(bank)`` (which the accelerometer, measuring
 the tires' force, does not see). :func:`true_vehicle` gives the parameters of the
 car the plant drives, as a config would state them were it right, :func:`true_fit` the
-calibration that would be exact.
+calibration that would be exact. :func:`drawn_mismatch` draws a car as wrong as its config admits, the
+honesty grid's test of whether the published standard deviations cover a real car's error.
 """
 from __future__ import annotations
 
@@ -59,6 +60,23 @@ class PlantMismatch:
     def bank_acceleration(self) -> float:
         """Gravity's component along the car's y axis, m/s^2."""
         return GRAVITY * math.sin(self.bank)
+
+
+DRAWN_AY_BIAS = 0.1  # m/s^2, std: a production ESC accelerometer's residual offset plus a road's crown (2 % is 0.2)
+DRAWN_GYRO_BIAS = math.radians(0.05)  # rad/s, std: what the built-in config's gyro noise (0.11 deg/s) leaves for bias
+STIFFNESS_SCALE_LIMITS = (0.5, 1.5)
+
+
+def drawn_mismatch(config_vehicle: VehicleParams, seed: int) -> PlantMismatch:
+    """A car as wrong as its config admits, the same for every run of ``seed``: each axle's cornering stiffness
+    scaled by ``1 + e N(0, 1)`` (``e`` the config's ``cornering_stiffness_uncertainty``, within
+    :data:`STIFFNESS_SCALE_LIMITS`), lateral accelerometer and gyro biases drawn with :data:`DRAWN_AY_BIAS` and
+    :data:`DRAWN_GYRO_BIAS`."""
+    normal = np.random.default_rng([seed, 8855]).standard_normal(4)
+    low, high = STIFFNESS_SCALE_LIMITS
+    scale = np.clip(1.0 + config_vehicle.cornering_stiffness_uncertainty * normal[:2], low, high)
+    return PlantMismatch(stiffness_scale_front=float(scale[0]), stiffness_scale_rear=float(scale[1]),
+                         ay_bias=float(DRAWN_AY_BIAS * normal[2]), gyro_bias=float(DRAWN_GYRO_BIAS * normal[3]))
 
 
 def true_vehicle(config_vehicle: VehicleParams, mismatch: PlantMismatch,
