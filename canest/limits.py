@@ -69,6 +69,10 @@ TIRE = {
 }
 
 STIFFNESS_UNCERTAINTY = Range(0.0, 1.0)  # vehicle.cornering_stiffness_uncertainty, relative (optional)
+ATTITUDE = {  # vehicle (optional, 0 by default): the body's tilt the accelerometers read, 15: more than a soft SUV's
+    "accelerometer_roll_gradient": Range(0.0, 15.0, "deg/g"),
+    "accelerometer_pitch_gradient": Range(0.0, 15.0, "deg/g"),
+}
 
 DRIVE = {  # vehicle: the axle shares of the longitudinal force, for the tire-force model without motor torques
     "drive_front_share": Range(0.0, 1.0),

@@ -50,6 +50,10 @@ class VehicleParams:
     # relative (1 std) error of the cornering stiffnesses: 0.3 for textbook values, less once identified
     # (``canest calibrate``); the published sideslip std carries it (estimation.validity)
     cornering_stiffness_uncertainty: float = 0.3
+    # deg/g (the field's unit) of body roll and nose-up pitch that the accelerometers read as gravity
+    # (canest.models.attitude); 0: the ESC publishes ax and ay level
+    accelerometer_roll_gradient: float = 0.0
+    accelerometer_pitch_gradient: float = 0.0
 
     @property
     def wheelbase(self) -> float:

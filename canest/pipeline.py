@@ -18,6 +18,7 @@ import can
 from canest.codec.decode import InputDecoder
 from canest.codec.encode import EstimateEncoder
 from canest.estimation.catalog import make_estimator
+from canest.estimation.leveling import AccelerometerLeveling
 from canest.estimation.online_calibration import make_calibration
 from canest.resample import Resampler, TickClock
 from canest.settings import Config
@@ -29,6 +30,7 @@ class Pipeline:
         self.decoder = InputDecoder(config)
         self.resampler = Resampler(config.signals, self.decoder.timeouts(config.estimator.timeout_cycles))
         self.estimator = make_estimator(config)
+        self.leveling = AccelerometerLeveling(config.vehicle, self.resampler.names)  # the body's tilt out of ax, ay
         self.calibration = make_calibration(config, self.resampler.names)  # corrects each sample before a step
         self.encoder = EstimateEncoder(config.output_dbc, output_channel)
         self.clock = TickClock(1.0 / config.estimator.rate_hz)
@@ -52,7 +54,7 @@ class Pipeline:
 
     def _step(self, tick: float):
         """One tick's estimate, carrying the online calibration's report when the learner runs."""
-        estimate = self.estimator.step(self.calibration.correct(self.resampler.sample(tick)))
+        estimate = self.estimator.step(self.calibration.correct(self.leveling.level(self.resampler.sample(tick))))
         if self.calibration.enabled:
             estimate.calibration = self.calibration.report()
         return estimate

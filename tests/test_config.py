@@ -240,6 +240,7 @@ def test_bus_options_are_python_can_keywords_checked_where_python_can_would_igno
     (("vehicle",), "wheel_radius", 359.0, "must be at most 2 (0.1 to 2 m), got 359.0"),
     (("vehicle",), "steering_ratio", 0.5, "must be at least 1 (1 to 50), got 0.5"),
     (("vehicle", "tire"), "nominal_friction", 9.0, "must be at most 2 (0.05 to 2), got 9.0"),
+    (("vehicle",), "accelerometer_roll_gradient", 20.0, "must be at most 15 (0 to 15 deg/g), got 20.0"),
     (("vehicle", "tire"), "lateral_curvature", 1.5, "must be at most 1 (-10 to 1), got 1.5"),
     (("estimator",), "rate_hz", 0.001, "must be at least 1 (1 to 1000 Hz), got 0.001"),
     (("estimator",), "rate_hz", 5000, "must be at most 1000 (1 to 1000 Hz), got 5000"),

@@ -1,11 +1,17 @@
 """The simulator's launch maneuver (longitudinal excitation bounded by traction control), friction jump and drawn cars."""
+import dataclasses
+import math
+
 import numpy as np
 import pytest
 
 from canest.commands.simulate import parse_mu_jump
 from canest.signals import WHEELS
 from canest.sim.maneuvers import Driver
-from canest.sim.mismatch import DRAWN_AY_BIAS, DRAWN_GYRO_BIAS, STIFFNESS_SCALE_LIMITS, drawn_mismatch
+from canest.models.attitude import level_reading, per_si, tilted_reading
+from canest.models.wheels import GRAVITY
+from canest.sim.mismatch import (DRAWN_AY_BIAS, DRAWN_GYRO_BIAS, STIFFNESS_SCALE_LIMITS, PlantMismatch,
+                                  drawn_mismatch)
 from canest.sim.simulate import simulate
 
 
@@ -55,3 +61,24 @@ def test_a_drawn_car_is_as_wrong_as_its_config_admits(config):
     plant = simulate(config, "step", 60.0, 0.85, duration=2.0, mismatch=cars[0]).truth
     exact = simulate(config, "step", 60.0, 0.85, duration=2.0).truth
     assert not np.allclose(plant["beta"], exact["beta"])  # the drawn car drives differently
+
+
+def test_accelerometers_on_the_body_read_its_roll_and_pitch_as_gravity(config):
+    """A body rolling 4 deg/g reads a 0.5 g bend 7 % high, in either bend; read level again exactly; the plant
+    drives as before, only its accelerometers read differently (the config's tilt unless the car says)."""
+    roll = per_si(4.0)
+    ay = tilted_reading(0.5 * GRAVITY, roll)
+    assert ay == pytest.approx(0.5 * GRAVITY * 1.069, rel=1e-3)
+    assert tilted_reading(-0.5 * GRAVITY, roll) == pytest.approx(-ay)
+    assert tilted_reading(2.0, per_si(2.0)) == pytest.approx(2.0 * (1.0 + math.radians(2.0)), rel=1e-3)
+    readings = np.linspace(-12.0, 12.0, 49)
+    for gradient in (per_si(4.0), per_si(15.0)):
+        assert np.allclose(tilted_reading(level_reading(readings, gradient), gradient), readings, atol=1e-3)
+    tilted = simulate(config, "step", 60.0, 0.85, duration=2.0, noise_scale=0.0,
+                      mismatch=PlantMismatch(roll_gradient=4.0, pitch_gradient=2.0))
+    level = simulate(config, "step", 60.0, 0.85, duration=2.0, noise_scale=0.0)
+    assert np.array_equal(tilted.truth["ay"], level.truth["ay"])
+    assert [f.data for f in tilted.frames] != [f.data for f in level.frames]
+    rolling = dataclasses.replace(config, vehicle=dataclasses.replace(config.vehicle, accelerometer_roll_gradient=4.0))
+    assert [f.data for f in simulate(rolling, "step", 60.0, 0.85, duration=2.0, noise_scale=0.0).frames] != \
+        [f.data for f in level.frames]  # the config's tilt, when the car does not say otherwise

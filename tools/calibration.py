@@ -4,6 +4,7 @@
     python tools/calibration.py                    # three 60 s country roads (seeds 3-5), banked +3, -3, 0 deg
     python tools/calibration.py --duration 30      # what tests/test_calibrate.py checks
     python tools/calibration.py --online           # the daemon's online calibration over one 120 s road, bank 3 deg
+    python tools/calibration.py --online --bank 0 --attitude 4,2   # accelerometers rolling 4 deg/g, pitching 2
 
 The simulated car differs from the config as issue 17 says (front stiffness x0.7, rear x1.3, steering offset
 1.5 deg, ratio +8 %, gyro bias 0.5 deg/s, ay bias 0.2 m/s^2, wheel radius +3 %); the drives are cached in
@@ -83,10 +84,13 @@ def rmse(config, log: Path, truth: Path, skip: float = 0.5, on_frame=None, at_en
     return {s.state: s.rmse for s in score(table, read_table(truth), STATES, skip=skip)}
 
 
-def online(config, duration: float, bank_deg: float, workdir: Path) -> None:
-    """The online calibration's learned values over one road, and what it does to the estimates after 60 s."""
-    mismatch = dataclasses.replace(WRONG, bank=math.radians(bank_deg))
-    log, truth = workdir / f"online-s3-bank{bank_deg:g}-{duration:g}s.log", workdir / f"online-s3-bank{bank_deg:g}.csv"
+def online(config, duration: float, bank_deg: float, workdir: Path, attitude=(0.0, 0.0)) -> None:
+    """The online calibration's learned values over one road, and what it does to the estimates after 60 s;
+    ``attitude``: the body's (roll, pitch) gradients in deg/g, which its accelerometers read."""
+    mismatch = dataclasses.replace(WRONG, bank=math.radians(bank_deg), roll_gradient=attitude[0],
+                                   pitch_gradient=attitude[1])
+    name = f"online-s3-bank{bank_deg:g}" + ("-roll{:g}-pitch{:g}".format(*attitude) if any(attitude) else "")
+    log, truth = workdir / f"{name}-{duration:g}s.log", workdir / f"{name}.csv"
     if not (log.exists() and truth.exists()):
         print(f"simulating road 3 ({duration:g} s, bank {bank_deg:+g} deg) ...", file=sys.stderr, flush=True)
         sim = simulate(config, "country", 80.0, 0.85, duration=duration, seed=3, mismatch=mismatch)
@@ -167,12 +171,15 @@ def main() -> None:
     parser.add_argument("--workdir", default=str(Path(tempfile.gettempdir()) / "canest-calibration"))
     parser.add_argument("--online", action="store_true", help="the online calibration over one road instead")
     parser.add_argument("--bank", type=float, default=3.0, help="with --online: the road's bank, deg (default 3)")
+    parser.add_argument("--attitude", default="0,0", metavar="ROLL,PITCH",
+                        help="with --online: the body's roll and pitch gradients, deg/g, read by its accelerometers "
+                             "(default 0,0: as if the ESC compensated them; a passenger car: 3-6 and 1-3)")
     args = parser.parse_args()
     config = load_config(args.config)
     workdir = Path(args.workdir)
     workdir.mkdir(parents=True, exist_ok=True)
     if args.online:
-        online(config, args.duration or 120.0, args.bank, workdir)
+        online(config, args.duration or 120.0, args.bank, workdir, [float(v) for v in args.attitude.split(",")])
         return
     args.duration = args.duration or 60.0
     paths = drives(config, args.duration, workdir)

@@ -16,6 +16,7 @@ import numpy as np
 from canest.codec.decode import InputDecoder
 from canest.errors import ConfigError, LogError
 from canest.estimation.inputs import WHEEL_SPEEDS, TickInputs
+from canest.estimation.leveling import AccelerometerLeveling
 from canest.estimation.reference_speed import TORQUES, slip_free_speed, tick_usage
 from canest.io.logfiles import open_log
 from canest.models.wheels import WheelGeometry
@@ -69,6 +70,7 @@ def read_drive(config: Config, path, log_format=None, log_channel=None) -> Drive
     What the reader could not read is a warning naming the log, as in a replay."""
     decoder = InputDecoder(config)
     resampler = Resampler(config.signals, decoder.timeouts(config.estimator.timeout_cycles))
+    leveling = AccelerometerLeveling(config.vehicle, resampler.names)
     clock = TickClock(STEP)
     geometry = WheelGeometry(config.vehicle)
     rows, previous_tick = [], None
@@ -77,7 +79,7 @@ def read_drive(config: Config, path, log_format=None, log_channel=None) -> Drive
     try:
         for msg in frames:
             for tick in clock.due(msg.timestamp):
-                inputs = TickInputs(resampler.sample(tick))
+                inputs = TickInputs(leveling.level(resampler.sample(tick)))
                 speed = wheel_speed(inputs, geometry, config.vehicle) if inputs.has(*NEEDED) else 0.0
                 if speed >= MIN_SPEED:
                     start = previous_tick is None or tick - previous_tick > 1.5 * STEP

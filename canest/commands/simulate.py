@@ -6,6 +6,7 @@ import sys
 
 from tqdm import tqdm
 
+from canest import limits
 from canest.config import DEFAULT_CONFIG
 from canest.errors import UsageError
 from canest.commands.common import FORMATTER, add_config, config_from_args
@@ -24,7 +25,7 @@ EPILOG = """examples:
   canest simulate -m country --seed 3 --stiffness-scale 0.7,1.3 --steering-offset 1.5 --steering-ratio-scale 1.08 \
       --gyro-bias 0.5 --ay-bias 0.2 --wheel-radius-scale 1.03 --bank 3 -o wrong.log --truth wrong.csv
 
-The car options (--stiffness-scale ... --bank) make the simulated car differ
+The car options (--stiffness-scale ... --pitch-gradient) make the simulated car differ
 from the config, which then is wrong the way a real car's config is (what
 `canest calibrate` corrects); the log is still encoded through the config.
 The log is encoded through the config's input DBC and signal map, each message
@@ -78,6 +79,13 @@ def register(subparsers) -> None:
                      help="lateral accelerometer bias in m/s^2 (default -0.03)")
     car.add_argument("--bank", type=float, default=0.0, metavar="DEG",
                      help="road bank in deg, positive when the road falls to the left (default 0)")
+    car.add_argument("--roll-gradient", type=float, metavar="DEG/G",
+                     help="body roll per g of lateral acceleration, read by the accelerometers fixed to the body "
+                          "(a passenger car: 3-6; 0: the ESC publishes ay level; default the config's "
+                          "accelerometer_roll_gradient)")
+    car.add_argument("--pitch-gradient", type=float, metavar="DEG/G",
+                     help="nose-up pitch per g of longitudinal acceleration, as --roll-gradient (a passenger "
+                          "car: 1-3; default the config's accelerometer_pitch_gradient)")
     p.add_argument("--out", "-o", required=True, help="CAN log to write (- for candump text on standard output)")
     p.add_argument("--truth", required=True, help="truth CSV to write")
     p.set_defaults(func=run)
@@ -109,6 +117,7 @@ def parse_mu_jump(text):
 
 SCALE_RANGE = (0.3, 3.0)  # a car's stiffness, ratio or radius off by more is another car
 MAX_BANK_DEG = 15.0
+MAX_ATTITUDE_GRADIENT = limits.ATTITUDE["accelerometer_roll_gradient"].high
 
 
 def parse_mismatch(args) -> PlantMismatch:
@@ -126,9 +135,13 @@ def parse_mismatch(args) -> PlantMismatch:
             raise UsageError(f"{option}: a factor from {low:g} to {high:g}, got {', '.join(map(str, values))}")
     if not abs(args.bank) <= MAX_BANK_DEG:
         raise UsageError(f"--bank: degrees from -{MAX_BANK_DEG:g} to {MAX_BANK_DEG:g}, got {args.bank}")
+    for option, value in (("--roll-gradient", args.roll_gradient), ("--pitch-gradient", args.pitch_gradient)):
+        if value is not None and not 0.0 <= value <= MAX_ATTITUDE_GRADIENT:
+            raise UsageError(f"{option}: deg/g from 0 to {MAX_ATTITUDE_GRADIENT:g}, got {value}")
     radians = lambda value: None if value is None else math.radians(value)  # noqa: E731
     return PlantMismatch(scales[0], scales[1], args.steering_ratio_scale, args.wheel_radius_scale,
-                         radians(args.steering_offset), radians(args.gyro_bias), args.ay_bias, math.radians(args.bank))
+                         radians(args.steering_offset), radians(args.gyro_bias), args.ay_bias, math.radians(args.bank),
+                         args.roll_gradient, args.pitch_gradient)
 
 
 def run(args) -> int:

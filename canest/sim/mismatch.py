@@ -8,7 +8,8 @@ gyro, lateral accelerometer) in place of the defaults of
 :mod:`canest.sim.sensors`, and a road bank: a constant tilt of the road about
 the car's x axis, positive when the road falls to the left, so that gravity
 pulls the car to the left with ``g sin(bank)`` (which the accelerometer, measuring
-the tires' force, does not see). :func:`true_vehicle` gives the parameters of the
+the tires' force, does not see), and the body's roll and pitch gradients its accelerometers read
+(:mod:`canest.models.attitude`; deg/g, None: the config's). :func:`true_vehicle` gives the parameters of the
 car the plant drives, as a config would state them were it right, :func:`true_fit` the
 calibration that would be exact. :func:`drawn_mismatch` draws a car as wrong as its config admits, the
 honesty grid's test of whether the published standard deviations cover a real car's error.
@@ -40,6 +41,8 @@ class PlantMismatch:
     gyro_bias: float | None = None  # rad/s
     ay_bias: float | None = None  # m/s^2
     bank: float = 0.0  # rad
+    roll_gradient: float | None = None  # deg/g the accelerometers read; None: the config's
+    pitch_gradient: float | None = None  # deg/g
 
     def tire(self, tire: TireParams = TireParams()) -> TireParams:
         """The plant's tire with the lateral stiffnesses scaled."""
@@ -81,8 +84,8 @@ def drawn_mismatch(config_vehicle: VehicleParams, seed: int) -> PlantMismatch:
 
 def true_vehicle(config_vehicle: VehicleParams, mismatch: PlantMismatch,
                  tire: TireParams = TireParams()) -> VehicleParams:
-    """The car the plant drives: ratio and wheel radius scaled, and the axle cornering stiffnesses of its tire
-    at static load (what a right config would say)."""
+    """The car the plant drives: ratio and wheel radius scaled, the axle cornering stiffnesses of its tire
+    at static load and its accelerometers' tilt (what a right config would say)."""
     geometry = WheelGeometry(config_vehicle)
     loads = geometry.static_load
     scaled = mismatch.tire(tire)
@@ -91,7 +94,10 @@ def true_vehicle(config_vehicle: VehicleParams, mismatch: PlantMismatch,
         steering_ratio=config_vehicle.steering_ratio * mismatch.steering_ratio_scale,
         wheel_radius=config_vehicle.wheel_radius * mismatch.wheel_radius_scale,
         cornering_stiffness_front=float(scaled.lateral_stiffness_front * loads[:2].sum()),
-        cornering_stiffness_rear=float(scaled.lateral_stiffness_rear * loads[2:].sum()))
+        cornering_stiffness_rear=float(scaled.lateral_stiffness_rear * loads[2:].sum()),
+        **{f"accelerometer_{axis}_gradient": value for axis, value in (("roll", mismatch.roll_gradient),
+                                                                        ("pitch", mismatch.pitch_gradient))
+           if value is not None})
 
 
 def true_fit(config_vehicle: VehicleParams, mismatch: PlantMismatch, banks=(0.0,)) -> Fit:

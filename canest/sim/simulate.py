@@ -19,6 +19,7 @@ import numpy as np
 from canest.codec.encode import InputEncoder
 from canest.errors import SimulationError
 from canest.settings import Config
+from canest.models.attitude import per_si, tilted_reading
 from canest.signals import WHEELS
 from canest.sim.maneuvers import Driver, make_maneuver
 from canest.sim.mismatch import PlantMismatch, true_vehicle
@@ -53,9 +54,12 @@ class Simulation:
             writer.writerows(zip(*self.truth.values()))
 
 
-def _true_inputs(state, outputs, swa, torque) -> dict:
-    values = {"steering_wheel_angle": swa, "ax": outputs.ax, "ay": outputs.ay, "yaw_rate": state[R],
-              "ax_2": outputs.ax, "ay_2": outputs.ay, "yaw_rate_2": state[R]}
+def _true_inputs(state, outputs, swa, torque, vehicle) -> dict:
+    """What perfect sensors read: the accelerometers on the body, tilted with its roll and pitch."""
+    ax = tilted_reading(outputs.ax, per_si(vehicle.accelerometer_pitch_gradient))
+    ay = tilted_reading(outputs.ay, per_si(vehicle.accelerometer_roll_gradient))
+    values = {"steering_wheel_angle": swa, "ax": ax, "ay": ay, "yaw_rate": state[R],
+              "ax_2": ax, "ay_2": ay, "yaw_rate_2": state[R]}
     for i, w in enumerate(WHEELS):
         values[f"wheel_speed_{w}"] = state[W][i]
         values[f"motor_torque_{w}"] = torque[i]
@@ -105,7 +109,7 @@ def simulate(config: Config, maneuver: str, speed_kmh: float, mu, *, duration=No
         if k % truth_every == 0:
             rows.append(_truth_row(t + start_time, state, outputs, delta, swa, plant.mu, torque))
         if schedule[0][0] <= t:
-            true_values = _true_inputs(state, outputs, swa, torque)
+            true_values = _true_inputs(state, outputs, swa, torque, vehicle)
             while schedule[0][0] <= t:
                 due, frame_id, cycle = heapq.heappop(schedule)
                 measured = {name: sensors.measure(name, value, t) for name, value in true_values.items()}
