@@ -10,8 +10,10 @@ from canest.apps.replay import replay
 from canest.config import load_config
 from canest.codec.encode import EstimateEncoder
 from canest.estimation import validity
+from canest.estimation.judge import StateJudge
 from canest.estimation.estimate import CAUSES, Estimate
 from canest.filters.parameters import truncated
+from canest.models.single_track import SingleTrackModel
 from canest.sim.simulate import simulate
 from tests.conftest import ROOT
 from tests.test_config import write_variant
@@ -89,11 +91,26 @@ def test_lateral_drift_bounds_vx_from_a_lateral_velocity_the_model_misses():
     assert drift.update(vx * yaw_rate, yaw_rate, vx, 0.0, True, False) == 0.0  # the wheels measure vx again
     assert drift.update(vx * yaw_rate, yaw_rate, vx, 0.0, False, False) == pytest.approx(
         yaw_rate * 2.0 * dt, rel=0.02)  # the 2 m/s the model misses still move vx
-    drift.restart_model()  # a restarted filter's sideslip jumps, the car's does not
+    # a restarted filter's sideslip jumps (to 0.05 rad: vy +1 m/s), the car's does not: its vy is still -2 m/s,
+    # 3 m/s from the model's
     restarted = drift.update(vx * yaw_rate, yaw_rate, vx, 0.05, False, False)
-    assert restarted == pytest.approx(2 * yaw_rate * 2.0 * dt, rel=0.02)
+    assert restarted == pytest.approx(yaw_rate * (2.0 + 3.0) * dt, rel=0.02)
     drift.update(vx * yaw_rate, yaw_rate, vx, 0.0, True, True)  # sideslip known and vx measured
     assert drift.update(vx * yaw_rate, yaw_rate, vx, 0.0, False, False) == 0.0
+
+
+def test_a_filter_reset_keeps_the_cars_lateral_velocity_where_the_model_last_knew_it(config):
+    """mcsckf, reset four times in a slide with its sideslip 7 deg off, restarted near zero sideslip each time: the
+    car's lateral velocity did not jump with it. Carried over as if it had, the drift bound stayed at 0.3 m/s while
+    vx ran 0.9 m/s off, flagged valid."""
+    dt, vx, yaw_rate = 0.01, 20.0, 0.2
+    judge = StateJudge(SingleTrackModel(config.vehicle), config.vehicle, dt)
+    drift = judge.lateral_drift
+    drift.update(vx * yaw_rate, yaw_rate, vx, 0.0, True, True)  # the sideslip known (0), vx measured
+    for _ in range(100):  # the car slides to vy -2 m/s in 1 s; the model keeps vy -0.5
+        drift.update(vx * yaw_rate - 2.0, yaw_rate, vx, -0.5 / vx, True, False)
+    judge.reset()  # the filter restarts at zero sideslip, 2 m/s from the car's
+    assert drift.update(vx * yaw_rate, yaw_rate, vx, 0.0, False, False) == pytest.approx(yaw_rate * 2.0 * dt, rel=0.02)
 
 
 def test_lateral_drift_spreads_vx_by_the_known_sideslips_own_uncertainty():

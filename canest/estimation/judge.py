@@ -40,7 +40,6 @@ class StateJudge:
     def reset(self) -> None:
         self.consistency.reset()
         self.kinematic.reset()
-        self.lateral_drift.restart_model()
         if self.regime is not None:
             self.regime.reset()
 

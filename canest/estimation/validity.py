@@ -255,8 +255,10 @@ class LateralDrift:
     ``vx`` follows ``dvx/dt = ax + r vy``; with the model's ``vy = vx tan(beta)`` wrong by ``e`` the error
     grows at ``r e``. ``e`` is the kinematic lateral velocity's change, ``integral(ay - r vx)``, less the
     model's, since the model's sideslip was last known (valid); the drift is ``|integral(r e)|`` since the
-    wheels last measured vx (``vx_measured``: the reference speed rolled freely). A filter restart
-    (:meth:`restart_model`) moves the model's sideslip, not the car's: ``e`` goes on from the restarted model.
+    wheels last measured vx (``vx_measured``: the reference speed rolled freely). A filter restart moves the
+    model's sideslip, not the car's: the car's lateral velocity stays anchored where the model last knew it,
+    so ``e`` takes in the restarted model's jump (continuing ``e`` instead let mcsckf's vx, restarted four times
+    in a slide with the sideslip 7 deg off, run 0.9 m/s off against a drift bound of 0.3, flagged valid).
 
     While the sideslip is known, its error is what its std says, and a systematic one (a stiffness off, see
     :func:`sideslip_model_std`): vx's error grows at ``r`` times the lateral velocity's std, linearly.
@@ -271,26 +273,16 @@ class LateralDrift:
     def reset(self) -> None:
         self.kinematic = 0.0
         self.known = None  # (kinematic, model) lateral velocity when the sideslip was last known
-        self.model = None  # the model's lateral velocity at the last update
-        self.restarted = False
         self.drift = 0.0
         self.spread = 0.0
-
-    def restart_model(self) -> None:
-        """The filter restarts: its next lateral velocity continues the mismatch ``e``."""
-        self.restarted = self.known is not None
 
     def update(self, ay: float, yaw_rate: float, vx: float, beta: float, vx_measured: bool,
                sideslip_known: bool, lateral_std: float = 0.0) -> float:
         """The drift bound ``|integral(r e)|`` (m/s); :attr:`spread` grows by ``|r| lateral_std dt`` (m/s)."""
         self.kinematic += (ay - yaw_rate * vx) * self.dt
         model = vx * math.tan(beta)
-        if self.restarted:
-            self.known = (self.known[0], self.known[1] + model - self.model)
-            self.restarted = False
         if sideslip_known or self.known is None:
             self.known = (self.kinematic, model)
-        self.model = model
         mismatch = (self.kinematic - self.known[0]) - (model - self.known[1])
         self.drift = 0.0 if vx_measured else self.drift + yaw_rate * mismatch * self.dt
         self.spread = 0.0 if vx_measured else self.spread + abs(yaw_rate) * lateral_std * self.dt
