@@ -5,6 +5,7 @@ stiffness x0.7, rear x1.3, steering offset 1.5 deg, ratio +8 %, gyro bias 0.5 de
 radius +3 %), the road banked 3 deg one way, the same bank the other way, and flat (a constant bank cannot be
 told from an ay bias: calibrate holds the logs' mean bank at 0). Every step is the real command line.
 """
+import dataclasses
 import json
 import math
 import os
@@ -15,9 +16,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from canest.apps.calibrate import calibrate
 from canest.apps.calibrated_config import write_calibrated
+from canest.apps.drive_signals import read_drive
 from canest.config import load_config
 from canest.sim.mismatch import PlantMismatch, true_fit, true_vehicle
+from canest.sim.simulate import simulate
 from tests.conftest import CONFIG
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -166,3 +170,18 @@ def test_the_simulated_cars_options_are_checked(tmp_path):
         result = canest("simulate", "--config", CONFIG, "-m", "country", option, value, "-o", tmp_path / "x.log",
                         "--truth", tmp_path / "x.csv")
         assert result.returncode == 2 and says in result.stderr and result.stderr.count("\n") == 1, result.stderr
+
+
+def test_calibrate_reads_accelerometers_that_tilt_with_the_body_level_when_the_config_says_so(tmp_path):
+    """4 deg/g of roll and 2 of pitch in the accelerometers: unknown, the fit takes the roll for a larger wheel
+    (+10 % on two 60 s roads); with the config's gradients the samples are read level, as the daemon reads them."""
+    config = load_config(CONFIG)
+    log = tmp_path / "tilted.log"
+    simulate(config, "country", 80.0, 0.85, duration=40.0, seed=4,
+             mismatch=dataclasses.replace(WRONG, roll_gradient=4.0, pitch_gradient=2.0)).write_log(log)
+    aware = dataclasses.replace(config, vehicle=dataclasses.replace(
+        config.vehicle, accelerometer_roll_gradient=4.0, accelerometer_pitch_gradient=2.0))
+    speed = {name: calibrate(told.vehicle, [read_drive(told, log)]).value("speed")
+             for name, told in (("unaware", config), ("aware", aware))}
+    assert speed["aware"] == pytest.approx(WRONG.wheel_radius_scale, abs=0.01)
+    assert speed["unaware"] > WRONG.wheel_radius_scale + 0.04
