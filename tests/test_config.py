@@ -276,9 +276,9 @@ def test_rate_and_mass_that_ran_into_nonsense_are_refused_by_check(tmp_path):
 def test_readme_table_states_every_range():
     """The README's configuration table is the one in canest/limits.py."""
     text = (ROOT / "README.md").read_text()
-    tables = {"vehicle": limits.VEHICLE, "vehicle.tire": limits.TIRE, "estimator": limits.ESTIMATOR,
-              "input.signals.*": limits.SIGNAL}
-    for prefix, table in tables.items():
+    tables = [("vehicle", limits.VEHICLE), ("vehicle", limits.ATTITUDE), ("vehicle.tire", limits.TIRE),
+              ("estimator", limits.ESTIMATOR), ("input.signals.*", limits.SIGNAL)]
+    for prefix, table in tables:
         for key, allowed in table.items():
             assert f"| `{prefix}.{key}` | {allowed} |" in text, f"{prefix}.{key}: {allowed}"
     assert f"| `estimator.process_noise.*`, `measurement_noise.*`, `initial_std.*` | {limits.NOISE} |" in text
