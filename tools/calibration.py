@@ -164,6 +164,15 @@ def without_learning(config):
     return dataclasses.replace(config, estimator=dataclasses.replace(config.estimator, online_calibration=False))
 
 
+def gradients(text: str) -> tuple:
+    """``ROLL,PITCH`` (deg/g) as two numbers."""
+    try:
+        roll, pitch = (float(v) for v in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected ROLL,PITCH in deg/g, e.g. 4,2, got '{text}'") from None
+    return roll, pitch
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--config", default=str(DEFAULT_CONFIG))
@@ -171,7 +180,7 @@ def main() -> None:
     parser.add_argument("--workdir", default=str(Path(tempfile.gettempdir()) / "canest-calibration"))
     parser.add_argument("--online", action="store_true", help="the online calibration over one road instead")
     parser.add_argument("--bank", type=float, default=3.0, help="with --online: the road's bank, deg (default 3)")
-    parser.add_argument("--attitude", default="0,0", metavar="ROLL,PITCH",
+    parser.add_argument("--attitude", default="0,0", metavar="ROLL,PITCH", type=gradients,
                         help="with --online: the body's roll and pitch gradients, deg/g, read by its accelerometers "
                              "(default 0,0: as if the ESC compensated them; a passenger car: 3-6 and 1-3)")
     args = parser.parse_args()
@@ -179,7 +188,7 @@ def main() -> None:
     workdir = Path(args.workdir)
     workdir.mkdir(parents=True, exist_ok=True)
     if args.online:
-        online(config, args.duration or 120.0, args.bank, workdir, [float(v) for v in args.attitude.split(",")])
+        online(config, args.duration or 120.0, args.bank, workdir, args.attitude)
         return
     args.duration = args.duration or 60.0
     paths = drives(config, args.duration, workdir)

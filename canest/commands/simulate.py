@@ -117,7 +117,6 @@ def parse_mu_jump(text):
 
 SCALE_RANGE = (0.3, 3.0)  # a car's stiffness, ratio or radius off by more is another car
 MAX_BANK_DEG = 15.0
-MAX_ATTITUDE_GRADIENT = limits.ATTITUDE["accelerometer_roll_gradient"].high
 
 
 def parse_mismatch(args) -> PlantMismatch:
@@ -135,9 +134,11 @@ def parse_mismatch(args) -> PlantMismatch:
             raise UsageError(f"{option}: a factor from {low:g} to {high:g}, got {', '.join(map(str, values))}")
     if not abs(args.bank) <= MAX_BANK_DEG:
         raise UsageError(f"--bank: degrees from -{MAX_BANK_DEG:g} to {MAX_BANK_DEG:g}, got {args.bank}")
-    for option, value in (("--roll-gradient", args.roll_gradient), ("--pitch-gradient", args.pitch_gradient)):
-        if value is not None and not 0.0 <= value <= MAX_ATTITUDE_GRADIENT:
-            raise UsageError(f"{option}: deg/g from 0 to {MAX_ATTITUDE_GRADIENT:g}, got {value}")
+    for axis in ("roll", "pitch"):
+        value = getattr(args, f"{axis}_gradient")
+        problem = None if value is None else limits.ATTITUDE[f"accelerometer_{axis}_gradient"].violation(value)
+        if problem:
+            raise UsageError(f"--{axis}-gradient: {problem}, got {value}")
     radians = lambda value: None if value is None else math.radians(value)  # noqa: E731
     return PlantMismatch(scales[0], scales[1], args.steering_ratio_scale, args.wheel_radius_scale,
                          radians(args.steering_offset), radians(args.gyro_bias), args.ay_bias, math.radians(args.bank),

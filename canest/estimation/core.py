@@ -256,12 +256,11 @@ class Estimator:
         """Add model-specific values, ``_std``, validity and causes (none for the single-track model); ``ratios``:
         this tick's consistency ratio per state (:meth:`StateJudge.ratios`)."""
 
-    def _rear_slip(self, x: np.ndarray, inputs: TickInputs) -> float:
-        """The rear wheels' mean slip angle (rad) at the estimate ``x``."""
+    def _rear_slip(self, x: np.ndarray) -> float:
+        """The rear wheels' mean slip angle (rad) at the estimate ``x`` (they do not steer: any road wheel angle)."""
         vx = x[self.vx]
         v_long, v_lat = self.geometry.wheel_velocities(np.array([x[self.yaw]]), np.array([vx]),
-                                                       np.array([vx * math.tan(x[self.beta])]),
-                                                       self._road_wheel_angle(inputs))
+                                                       np.array([vx * math.tan(x[self.beta])]), 0.0)
         return float(self.geometry.slip_angles(v_long, v_lat)[0, 2:].mean())
 
     def _publish(self, t, mode, missing, inputs: TickInputs, lateral_ok: bool = False) -> Estimate:
@@ -279,7 +278,8 @@ class Estimator:
         vx, beta = x[self.vx], x[self.beta]
         reference = self.reference_speed  # vx is measured unless the reference integrated ax this tick
         std = np.sqrt(np.maximum(np.diag(self.filter.covariance), 0.0))
-        beta_model_std = self.judge.sideslip_model_std(inputs.current("ay"), self._rear_slip(x, inputs))
+        rear_slip = None if self.judge.linear_tires else self._rear_slip(x)  # linear tires: the ay term
+        beta_model_std = self.judge.sideslip_model_std(inputs.current("ay"), rear_slip)
         drift = self.judge.drift(inputs, vx, beta, math.hypot(std[self.beta], beta_model_std),
                                  reference.last_t != t or reference.anchored_at == t)
         std = self.judge.widen(std, index, ratios, beta_model_std, drift)

@@ -54,10 +54,10 @@ class Simulation:
             writer.writerows(zip(*self.truth.values()))
 
 
-def _true_inputs(state, outputs, swa, torque, vehicle) -> dict:
-    """What perfect sensors read: the accelerometers on the body, tilted with its roll and pitch."""
-    ax = tilted_reading(outputs.ax, per_si(vehicle.accelerometer_pitch_gradient))
-    ay = tilted_reading(outputs.ay, per_si(vehicle.accelerometer_roll_gradient))
+def _true_inputs(state, outputs, swa, torque, tilt) -> dict:
+    """What perfect sensors read: the accelerometers on the body, tilted with its ``tilt`` (pitch and roll
+    gradients, rad per m/s^2)."""
+    ax, ay = tilted_reading(outputs.ax, tilt[0]), tilted_reading(outputs.ay, tilt[1])
     values = {"steering_wheel_angle": swa, "ax": ax, "ay": ay, "yaw_rate": state[R],
               "ax_2": ax, "ay_2": ay, "yaw_rate_2": state[R]}
     for i, w in enumerate(WHEELS):
@@ -83,6 +83,7 @@ def simulate(config: Config, maneuver: str, speed_kmh: float, mu, *, duration=No
     plan = make_maneuver(maneuver, speed, amplitude_deg, duration, seed)
     vehicle = true_vehicle(config.vehicle, mismatch)
     plant = TwoTrackPlant(vehicle, mu, mismatch.tire(), mismatch.bank_acceleration)
+    tilt = (per_si(vehicle.accelerometer_pitch_gradient), per_si(vehicle.accelerometer_roll_gradient))
     driver = Driver(vehicle, plan, speed)
     sensors = SensorModel(rng, noise_scale, outliers, mismatch.sensor_errors(), vibration=vibration)
     encoder = InputEncoder(config)
@@ -109,7 +110,7 @@ def simulate(config: Config, maneuver: str, speed_kmh: float, mu, *, duration=No
         if k % truth_every == 0:
             rows.append(_truth_row(t + start_time, state, outputs, delta, swa, plant.mu, torque))
         if schedule[0][0] <= t:
-            true_values = _true_inputs(state, outputs, swa, torque, vehicle)
+            true_values = _true_inputs(state, outputs, swa, torque, tilt)
             while schedule[0][0] <= t:
                 due, frame_id, cycle = heapq.heappop(schedule)
                 measured = {name: sensors.measure(name, value, t) for name, value in true_values.items()}
