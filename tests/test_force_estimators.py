@@ -163,3 +163,24 @@ def test_a_tires_stiffness_sensitivity_is_its_force_in_the_linear_range_and_zero
     assert model.stiffness_sensitivity(small_slip, u) == pytest.approx(np.hypot(fx, fy)[0], rel=0.02)
     sliding = np.array([0.0, 0.3, vx, *[vx / radius] * 4, *[0.2] * 4])  # 17 deg on friction 0.2
     assert np.all(model.stiffness_sensitivity(sliding, u) < 0.01 * model.friction_sensitivity(sliding, u))
+
+
+def test_the_tire_curves_error_moves_both_wheels_of_an_axle_together(config):
+    """The lateral forces' process noise beyond the configured one is, per axle, ``2 rho e^2 F F^T``: zero for
+    unloaded tires, positive semidefinite of rank one per axle, no front-rear or state-force terms."""
+    pipeline = Pipeline(with_filter(config, "dici-gfckf"))  # on the tire-force model
+    sim = simulate(config, "step", 80.0, 0.85, seed=0, duration=3.0)
+    for frame in sim.frames:
+        pipeline.feed(frame)
+    estimator = pipeline.estimator
+    forces = estimator.filter.x[3:7]
+    assert np.all(np.abs(forces) > 500.0)  # the test's premise: in the bend
+    added = estimator._process_noise() - estimator.Q
+    front, rear = added[3:5, 3:5], added[5:7, 5:7]
+    assert np.count_nonzero(added) == 8  # the two 2x2 axle blocks only
+    for block, pair in ((front, forces[:2]), (rear, forces[2:])):
+        np.testing.assert_allclose(np.linalg.eigvalsh(block)[0], 0.0, atol=1e-9 * np.abs(block).max())
+        np.testing.assert_allclose(block / block[0, 0], np.outer(pair, pair) / pair[0] ** 2, rtol=1e-9)
+    rho = estimator.filter.x[2] / config.vehicle.tire.relaxation_length
+    e = config.vehicle.cornering_stiffness_uncertainty
+    np.testing.assert_allclose(front[0, 0], 2 * rho * (e * forces[0]) ** 2 * estimator.dt, rtol=1e-9)

@@ -101,3 +101,16 @@ def test_the_sideslip_std_carries_a_stiffness_error_near_the_tire_limit(tmp_path
     result = honesty.run_case(CONFIG, [name], case, tmp_path)
     score = honesty.summarize("beta", result["sums"][name]["beta"])
     assert score.valid > 0.3 and score.vbw <= bound, score
+
+
+def test_the_lateral_forces_std_is_the_tire_curves_error_not_a_random_walks(tmp_path):
+    """The tire-force model's forces relax towards the tire curve; their std was that of a 3000 N/sqrt(s) random
+    walk against the relaxation (336 N on every wheel, NEES 0.03-0.3 on this drive of a car drawn with its
+    stiffnesses off). It is now the stiffness uncertainty's share of each force, moving an axle's two wheels
+    together, over a 300 N/sqrt(s) floor."""
+    case = honesty.Case("sine", 80.0, 0.85, 2, car="drawn")
+    result = honesty.run_case(CONFIG, ["dici-gfckf"], case, tmp_path)
+    scores = [honesty.summarize(f"fy_{wheel}", result["sums"]["dici-gfckf"][f"fy_{wheel}"])
+              for wheel in ("fl", "fr", "rl", "rr")]
+    assert all(score.valid > 0.3 and score.vbw == 0.0 for score in scores), scores
+    assert 0.4 <= sum(score.nees for score in scores) / len(scores) <= 2.0, scores

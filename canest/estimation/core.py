@@ -151,6 +151,11 @@ class Estimator:
         self.low_speed = x0[self.vx] < self.est.min_speed
         return True
 
+    def _process_noise(self) -> np.ndarray:
+        """Q of this tick's prediction: the configured one (a binding whose model error scales with its state adds
+        to it)."""
+        return self.Q
+
     def _road_wheel_angle(self, inputs: TickInputs) -> float:
         return self.steering_zero.angle(inputs) / self.vehicle.steering_ratio
 
@@ -228,7 +233,7 @@ class Estimator:
         self._choose_mode()
         u = self._control(inputs, t)
         started = time.thread_time() if self.step_times is not None else 0.0
-        self.filter.predict(self.transitions[self.low_speed], u, self.dt, self.Q)
+        self.filter.predict(self.transitions[self.low_speed], u, self.dt, self._process_noise())
         lateral_ok = not self.low_speed and inputs.has("steering_wheel_angle", "ay")
         channels = self._channels(inputs, t, lateral_ok)
         self.judge.record(channels, u, self.filter.x.copy(), self.filter.covariance.copy(), self.stale_before)

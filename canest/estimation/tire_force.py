@@ -20,7 +20,9 @@ from canest.estimation.core import Estimator
 from canest.estimation.inputs import WHEEL_SPEEDS, TickInputs
 from canest.estimation.reference_speed import TORQUES
 from canest.models import tire_force
+from canest.models.tire import relaxation_rate
 from canest.models.tire_force import AxDrivenTireForceModel, TireForceModel
+from canest.models.wheels import MIN_WHEEL_SPEED
 from canest.models.wheel_force import WheelAcceleration, longitudinal_forces
 from canest.signals import WHEELS
 
@@ -59,6 +61,21 @@ class TireForceEstimator(Estimator):
         loads = self.model.wheels.loads(ax, ay)
         x0[tire_force.FY] = self.vehicle.mass * ay * loads / loads.sum()
         return x0
+
+    def _process_noise(self) -> np.ndarray:
+        """The configured Q plus the tire curve's error on the lateral forces: an axle's cornering stiffness off by
+        ``e`` (the stiffness uncertainty) moves the steady-state forces of both its wheels by ``e F``, together. A
+        force that relaxes at ``rho = V / sigma`` towards such a steady state has a stationary error of ``e F``
+        under a random walk of intensity ``2 rho (e F)^2``: per axle the rank-one ``2 rho e^2 F F^T`` (left and
+        right fully correlated, so their split is left to the configured, independent part)."""
+        x = self.filter.x
+        rate = relaxation_rate(max(x[self.vx], MIN_WHEEL_SPEED), self.vehicle.tire.relaxation_length)
+        forces = np.zeros(len(x))
+        forces[tire_force.FY] = self.vehicle.cornering_stiffness_uncertainty * x[tire_force.FY]
+        front, rear = forces.copy(), forces
+        front[tire_force.FY.start + 2:] = 0.0
+        rear[:tire_force.FY.start + 2] = 0.0
+        return self.Q + 2.0 * rate * self.dt * (np.outer(front, front) + np.outer(rear, rear))
 
     def _control(self, inputs: TickInputs, t: float) -> np.ndarray:
         """u = (delta, ax, ay, Fx per wheel from eq 4); without motor torques (delta, ax, ay)."""
