@@ -35,3 +35,14 @@ def test_live_benchmark_smoke_run_on_virtual_buses():
     out = run_tool(ROOT / "tools" / "bench" / "live.py", "--bus", "virtual", "--seconds", "1", "--multipliers", "1")
     last = out.strip().splitlines()[-1].split()
     assert last[0] == "1x" and int(last[3]) == 0  # nothing dropped at nominal rate
+
+
+def test_online_calibration_tool_prints_finite_rmse(tmp_path):
+    """``tools/calibration.py --online`` scores the replays after 60 s: every row a number (its cache once paired a
+    drive with the truth of another duration, and every row read nan)."""
+    out = run_tool(ROOT / "tools" / "calibration.py", "--online", "--bank", "0", "--duration", "61",
+                   "--workdir", tmp_path)
+    rows = {" ".join(line.split()[:-3]): line.split()[-3:] for line in out.splitlines()
+            if " ".join(line.split()[:-3]) in ("online calibration", "without", "true parameters")}
+    assert len(rows) == 3, out
+    assert all(0.0 < float(value) < 5.0 for values in rows.values() for value in values), rows
