@@ -70,12 +70,11 @@ class TireForceEstimator(Estimator):
         right fully correlated, so their split is left to the configured, independent part)."""
         x = self.filter.x
         rate = relaxation_rate(max(x[self.vx], MIN_WHEEL_SPEED), self.vehicle.tire.relaxation_length)
-        forces = np.zeros(len(x))
-        forces[tire_force.FY] = self.vehicle.cornering_stiffness_uncertainty * x[tire_force.FY]
-        front, rear = forces.copy(), forces
-        front[tire_force.FY.start + 2:] = 0.0
-        rear[:tire_force.FY.start + 2] = 0.0
-        return self.Q + 2.0 * rate * self.dt * (np.outer(front, front) + np.outer(rear, rear))
+        Q = self.Q.copy()
+        for axle in tire_force.AXLE_FORCES:
+            error = self.vehicle.cornering_stiffness_uncertainty * x[axle]
+            Q[axle, axle] += 2.0 * rate * self.dt * np.outer(error, error)
+        return Q
 
     def _control(self, inputs: TickInputs, t: float) -> np.ndarray:
         """u = (delta, ax, ay, Fx per wheel from eq 4); without motor torques (delta, ax, ay)."""

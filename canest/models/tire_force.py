@@ -47,6 +47,7 @@ MEASUREMENT_NAMES = ("ax", "ay", "yaw_rate", "vx_wheel", "ax_2", "ay_2", "yaw_ra
 SENSOR_SETS = (1, 1, 1, 0, 2, 2, 2)
 YAW, BETA, VX = 0, 1, 2
 FY = slice(3, 7)
+AXLE_FORCES = (slice(3, 5), slice(5, 7))  # front (fl, fr), rear (rl, rr)
 DELTA, AX, AY = 0, 1, 2
 FX = slice(3, 7)
 LOW_SPEED_BETA_TAU = 0.5  # s
