@@ -38,11 +38,20 @@ def test_live_benchmark_smoke_run_on_virtual_buses():
 
 
 def test_online_calibration_tool_prints_finite_rmse(tmp_path):
-    """``tools/calibration.py --online`` scores the replays after 60 s: every row a number (its cache once paired a
-    drive with the truth of another duration, and every row read nan)."""
+    """``tools/calibration.py --online`` scores the replays after 60 s: every row a number."""
     out = run_tool(ROOT / "tools" / "calibration.py", "--online", "--bank", "0", "--duration", "61",
                    "--workdir", tmp_path)
     rows = {" ".join(line.split()[:-3]): line.split()[-3:] for line in out.splitlines()
             if " ".join(line.split()[:-3]) in ("online calibration", "without", "true parameters")}
     assert len(rows) == 3, out
     assert all(0.0 < float(value) < 5.0 for values in rows.values() for value in values), rows
+
+
+def test_the_calibration_tools_cached_drives_keep_their_own_truth(tmp_path):
+    """Its cache once named the truth without the drive's duration: a 120 s log was scored against the truth of
+    a later 60 s run, and every RMSE read nan."""
+    sys.path.insert(0, str(ROOT / "tools"))
+    import calibration
+    (log60, truth60), (log120, truth120) = (calibration.drive_files(tmp_path, "online-s3-bank0", d) for d in (60, 120))
+    assert len({log60, truth60, log120, truth120}) == 4
+    assert truth60.stem == log60.stem and truth120.stem == log120.stem

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import hashlib
 import math
 import sys
 import tempfile
@@ -51,12 +52,18 @@ BOUNDS = {"front": (1.0, "x", True), "rear": (1.0, "x", True), "ratio": (1.0, "x
           "ay_bias": (1.0, "m/s^2", 0.03)}
 
 
+def drive_files(workdir: Path, name: str, duration: float) -> tuple:
+    """(log, truth CSV) of a cached drive: both named by the drive and its duration (a run that paired a 120 s
+    log with the truth of a 60 s one scored nothing, RMSE nan). ``workdir`` is per config (:func:`main`)."""
+    log = workdir / f"{name}-{duration:g}s.log"
+    return log, log.with_suffix(".csv")
+
+
 def drives(config, duration: float, workdir: Path) -> list:
     """(log, truth CSV) per road, simulated once."""
     paths = []
     for seed, bank in ROADS:
-        log = workdir / f"country-s{seed}-bank{bank:g}-{duration:g}s.log"
-        truth = log.with_suffix(".csv")
+        log, truth = drive_files(workdir, f"country-s{seed}-bank{bank:g}", duration)
         if not (log.exists() and truth.exists()):
             print(f"simulating road {seed} ({duration:g} s, bank {bank:+g} deg) ...", file=sys.stderr, flush=True)
             sim = simulate(config, "country", 80.0, 0.85, duration=duration, seed=seed,
@@ -90,8 +97,7 @@ def online(config, duration: float, bank_deg: float, workdir: Path, attitude=(0.
     mismatch = dataclasses.replace(WRONG, bank=math.radians(bank_deg), roll_gradient=attitude[0],
                                    pitch_gradient=attitude[1])
     name = f"online-s3-bank{bank_deg:g}" + ("-roll{:g}-pitch{:g}".format(*attitude) if any(attitude) else "")
-    log = workdir / f"{name}-{duration:g}s.log"
-    truth = log.with_suffix(".csv")  # the drive's own: a truth of another duration scored nothing (RMSE nan)
+    log, truth = drive_files(workdir, name, duration)
     if not (log.exists() and truth.exists()):
         print(f"simulating road 3 ({duration:g} s, bank {bank_deg:+g} deg) ...", file=sys.stderr, flush=True)
         sim = simulate(config, "country", 80.0, 0.85, duration=duration, seed=3, mismatch=mismatch)
@@ -186,7 +192,7 @@ def main() -> None:
                              "(default 0,0: as if the ESC compensated them; a passenger car: 3-6 and 1-3)")
     args = parser.parse_args()
     config = load_config(args.config)
-    workdir = Path(args.workdir)
+    workdir = Path(args.workdir) / hashlib.sha1(Path(args.config).read_bytes()).hexdigest()[:8]  # drives per car
     workdir.mkdir(parents=True, exist_ok=True)
     if args.online:
         online(config, args.duration or 120.0, args.bank, workdir, args.attitude)

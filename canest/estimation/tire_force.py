@@ -12,6 +12,8 @@ ay) are skipped at low speed, as the single-track binding skips ay.
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from canest.estimation.channels import rows_of
@@ -64,16 +66,20 @@ class TireForceEstimator(Estimator):
 
     def _process_noise(self) -> np.ndarray:
         """The configured Q plus the tire curve's error on the lateral forces: an axle's cornering stiffness off by
-        ``e`` (the stiffness uncertainty) moves the steady-state forces of both its wheels by ``e F``, together. A
-        force that relaxes at ``rho = V / sigma`` towards such a steady state has a stationary error of ``e F``
-        under a random walk of intensity ``2 rho (e F)^2``: per axle the rank-one ``2 rho e^2 F F^T`` (left and
-        right fully correlated, so their split is left to the configured, independent part)."""
+        ``e`` (the stiffness uncertainty) moves the steady-state forces of both its wheels by ``e F``, together (on
+        a saturated tire the same term stands for the nominal friction's error). A force that relaxes by
+        ``a = exp(-rho dt)`` per tick (``rho = V / sigma``) towards such a steady state keeps an error of ``e F``
+        under a white noise of variance ``(1 - a^2) (e F)^2`` per tick: per axle the rank-one
+        ``(1 - a^2) e^2 F F^T`` (left and right fully correlated, so their split is left to the configured,
+        independent part). None at low speed, where the forces follow their load shares of ``m ay``."""
+        if self.low_speed:
+            return self.Q
         x = self.filter.x
         rate = relaxation_rate(max(x[self.vx], MIN_WHEEL_SPEED), self.vehicle.tire.relaxation_length)
         Q = self.Q.copy()
         for axle in tire_force.AXLE_FORCES:
             error = self.vehicle.cornering_stiffness_uncertainty * x[axle]
-            Q[axle, axle] += 2.0 * rate * self.dt * np.outer(error, error)
+            Q[axle, axle] -= math.expm1(-2.0 * rate * self.dt) * np.outer(error, error)
         return Q
 
     def _control(self, inputs: TickInputs, t: float) -> np.ndarray:
