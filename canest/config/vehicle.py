@@ -45,6 +45,7 @@ def read_vehicle(doc: Document) -> VehicleParams:
     values = {name: doc.number(("vehicle",), section, name, allowed) for name, allowed in limits.VEHICLE.items()}
     uncertainty = doc.number(("vehicle",), section, "cornering_stiffness_uncertainty", limits.STIFFNESS_UNCERTAINTY,
                              VehicleParams.cornering_stiffness_uncertainty)
-    attitude = {name: doc.number(("vehicle",), section, name, allowed, 0.0) for name, allowed in limits.ATTITUDE.items()}
+    attitude = {name: doc.number(("vehicle",), section, name, allowed, getattr(VehicleParams, name))
+                for name, allowed in limits.ATTITUDE.items()}
     return VehicleParams(name=doc.text(("vehicle",), section, "name", doc.path.stem), tire=read_tire(doc),
                          cornering_stiffness_uncertainty=uncertainty, **read_drive(doc, section), **attitude, **values)

@@ -71,8 +71,9 @@ class StateJudge:
         return {state: self.consistency.ratio(state) for state in validity.OBSERVED_BY}
 
     def sideslip_model_std(self, ay: float, rear_slip: float | None = None) -> float:
-        """The sideslip's model error (rad) at ``ay`` (:func:`validity.sideslip_model_std`)."""
-        return validity.sideslip_model_std(self.vehicle, ay, self.linear_tires, rear_slip)
+        """The sideslip's model error (rad) at ``ay``, or from the rear slip angle of a model with a tire curve
+        (:func:`validity.sideslip_model_std`)."""
+        return validity.sideslip_model_std(self.vehicle, ay, rear_slip)
 
     def drift(self, inputs, vx: float, beta: float, beta_std: float, vx_measured: bool) -> float:
         """This tick's bound on vx's drift from an unmodelled lateral velocity (0 without ay or a gyro);

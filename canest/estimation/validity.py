@@ -173,12 +173,13 @@ def inflation(ratio: float) -> float:
     return math.sqrt(ratio) if ratio > 1.0 else 1.0
 
 
-def sideslip_model_std(vehicle, ay: float, linear_tires: bool, rear_slip: float | None = None) -> float:
-    """Sideslip error (rad) of a rear cornering stiffness off by its relative uncertainty: at ``ay`` for linear tires,
-    from the estimate's ``rear_slip`` angle (rad) for a model with a tire curve (module docstring)."""
-    if not linear_tires and rear_slip is not None:
+def sideslip_model_std(vehicle, ay: float, rear_slip: float | None = None) -> float:
+    """Sideslip error (rad) of a rear cornering stiffness off by its relative uncertainty: from the estimate's
+    ``rear_slip`` angle (rad) for a model with a tire curve, else at ``ay`` for linear tires, whose secant stiffness
+    also falls with ``(ay / g)^2`` (module docstring)."""
+    if rear_slip is not None:
         return vehicle.cornering_stiffness_uncertainty * abs(rear_slip)
-    uncertainty = vehicle.cornering_stiffness_uncertainty + (DEGRESSIVE_STIFFNESS * (ay / GRAVITY) ** 2 if linear_tires else 0.0)
+    uncertainty = vehicle.cornering_stiffness_uncertainty + DEGRESSIVE_STIFFNESS * (ay / GRAVITY) ** 2
     return uncertainty * vehicle.mass * vehicle.cg_to_front * abs(ay) / (vehicle.wheelbase * vehicle.cornering_stiffness_rear)
 
 
