@@ -1,8 +1,8 @@
 """The parameters canest calibrates: their names, starting values, scales and physical bounds, and a fit's result.
 
-Shared by the offline fit (:mod:`canest.apps.calibrate`), the config writer and
+Shared by the offline fit (:mod:`canest.models.output_error`), the config writer and
 the simulator's mismatched car (:mod:`canest.sim.mismatch`), so it sits below
-all of them. What each parameter means: :mod:`canest.apps.calibrate`.
+all of them. What each parameter means: :mod:`canest.models.output_error`.
 """
 from __future__ import annotations
 

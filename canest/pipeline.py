@@ -54,7 +54,10 @@ class Pipeline:
 
     def _step(self, tick: float):
         """One tick's estimate, carrying the online calibration's report when the learner runs."""
-        estimate = self.estimator.step(self.calibration.correct(self.leveling.level(self.resampler.sample(tick))))
+        sample = self.calibration.correct(self.leveling.level(self.resampler.sample(tick)))
+        if self.calibration.enabled:
+            self.estimator.use_stiffness(*self.calibration.stiffness)
+        estimate = self.estimator.step(sample)
         if self.calibration.enabled:
             estimate.calibration = self.calibration.report()
         return estimate

@@ -1,4 +1,4 @@
-"""canest calibrate (canest/apps/calibrate.py): the wrong config of issue 17 corrected from three simulated drives.
+"""canest calibrate (canest/models/output_error.py): the wrong config of issue 17 corrected from three simulated drives.
 
 Three 30 s country roads (seeds 3-5) driven by a car that differs from its config as issue 17 says (front
 stiffness x0.7, rear x1.3, steering offset 1.5 deg, ratio +8 %, gyro bias 0.5 deg/s, ay bias 0.2 m/s^2, wheel
@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from canest.apps.calibrate import calibrate
+from canest.models.output_error import calibrate
 from canest.apps.calibrated_config import write_calibrated
 from canest.apps.drive_signals import read_drive
 from canest.config import load_config

@@ -98,3 +98,19 @@ def test_fusing_three_estimates_names_the_extra_without_scipy(monkeypatch):
         fuse_many("ici", xs, Ps)
     given = fuse_many("ci", xs, Ps, weights=np.full(3, 1.0 / 3.0))  # given weights need no optimizer
     np.testing.assert_allclose(given.P, np.linalg.inv(sum(np.linalg.inv(P) for P in Ps) / 3.0))
+
+
+def test_the_online_calibration_learns_without_scipy_and_says_once_that_the_stiffnesses_are_not(tmp_path):
+    code = f"""
+import sys
+from canest.config import load_config
+from canest.pipeline import Pipeline
+config = load_config({str(CONFIG)!r})
+first, second = Pipeline(config), Pipeline(config)
+print(first.calibration.enabled, first.calibration.window.enabled, second.calibration.window.enabled)
+"""
+    result = run(tmp_path, "-c", code)
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.split() == ["True", "False", "False"]
+    assert result.stderr.count("learning the cornering stiffnesses online needs the Python package") == 1
+    assert INSTALL in result.stderr

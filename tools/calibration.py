@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from canest.apps.calibrate import calibrate  # noqa: E402
+from canest.models.output_error import calibrate  # noqa: E402
 from canest.apps.calibrated_config import write_calibrated  # noqa: E402
 from canest.apps.drive_signals import read_drive  # noqa: E402
 from canest.apps.evaluate import read_table, score  # noqa: E402
@@ -111,7 +111,9 @@ def online(config, duration: float, bank_deg: float, workdir: Path, attitude=(0.
             "steering_offset": (mismatch.steering_offset, deg, "deg", 0.2),
             "ratio": (mismatch.steering_ratio_scale, 1.0, "x", None),
             "understeer": (true_vehicle(config.vehicle, mismatch).understeer_gradient, 1.0, "s^2/m", None),
-            "ax_bias": (DEFAULT_SENSORS["ax"].bias, 1.0, "m/s^2", 0.03)}
+            "ax_bias": (DEFAULT_SENSORS["ax"].bias, 1.0, "m/s^2", 0.03),
+            "front": (mismatch.stiffness_scale_front, 1.0, "x", None),
+            "rear": (mismatch.stiffness_scale_rear, 1.0, "x", None)}
     marks, snapshots, seconds = [30.0, 60.0], {}, []
 
     def snapshot(pipeline, t):

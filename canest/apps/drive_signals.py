@@ -9,9 +9,6 @@ after every such gap (``starts``).
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass
-
-import numpy as np
 
 from canest.codec.decode import InputDecoder
 from canest.errors import ConfigError, LogError
@@ -19,33 +16,14 @@ from canest.estimation.inputs import WHEEL_SPEEDS, TickInputs
 from canest.estimation.leveling import AccelerometerLeveling
 from canest.estimation.reference_speed import TORQUES, slip_free_speed, tick_usage
 from canest.io.logfiles import open_log
+from canest.models.output_error import MIN_SEGMENT, MIN_SPEED, STEP, drive_of_rows
 from canest.models.wheels import WheelGeometry
 from canest.params import VehicleParams
 from canest.resample import Resampler, TickClock
 from canest.settings import Config
 
-STEP = 0.02  # s: 50 Hz, fast enough for a car's yaw dynamics (eigenvalues below 15 1/s at 50-100 km/h)
-MIN_SPEED = 8.0  # m/s: slower, the slip angles are large and the linear single-track model does not hold
 NEEDED = ("steering_wheel_angle", "yaw_rate", "ay", *WHEEL_SPEEDS)
 LOG = logging.getLogger("canest.calibrate")
-MIN_SEGMENT = 2.0  # s: shorter stretches of usable driving are left out (their start transient is all they hold)
-
-
-@dataclass
-class Drive:
-    """One log's usable ticks: SI arrays of equal length, and where a new stretch starts."""
-
-    path: str
-    t: np.ndarray
-    steering_wheel_angle: np.ndarray  # rad
-    yaw_rate: np.ndarray  # rad/s
-    ay: np.ndarray  # m/s^2
-    wheel_speed: np.ndarray  # m/s: mean of the four wheels times the config's wheel radius (:func:`wheel_speed`)
-    starts: np.ndarray  # bool: the first tick of a stretch
-
-    @property
-    def seconds(self) -> float:
-        return len(self.t) * STEP
 
 
 def check_signals(config: Config) -> None:
@@ -93,18 +71,9 @@ def read_drive(config: Config, path, log_format=None, log_channel=None) -> Drive
         source.stop()
     for warning in source.warnings():
         LOG.warning(warning)
-    table = np.array(rows, dtype=float).reshape(-1, 6)
-    keep = _long_stretches(table[:, 5].astype(bool))
-    table = table[keep]
-    if len(table) * STEP < 2 * MIN_SEGMENT:
-        raise LogError(f"{path}: {len(table) * STEP:.1f} s of usable driving (all of steering, yaw rate, ay and "
+    drive = drive_of_rows(path, rows)
+    if drive.seconds < 2 * MIN_SEGMENT:
+        raise LogError(f"{path}: {drive.seconds:.1f} s of usable driving (all of steering, yaw rate, ay and "
                        f"the four wheel speeds, above {MIN_SPEED:g} m/s); calibration needs at least "
                        f"{2 * MIN_SEGMENT:g} s, better a minute of bends and straights")
-    return Drive(str(path), *table[:, :5].T, table[:, 5].astype(bool))
-
-
-def _long_stretches(starts: np.ndarray) -> np.ndarray:
-    """The ticks of stretches at least ``MIN_SEGMENT`` long."""
-    ids = np.cumsum(starts)
-    lengths = np.bincount(ids)
-    return lengths[ids] * STEP >= MIN_SEGMENT
+    return drive

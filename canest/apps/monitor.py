@@ -32,10 +32,10 @@ ROWS = [
 ]
 CALIBRATION_WAIT = 1.2  # s: once the estimates are complete, how long --once waits for the 1 Hz calibration
 DEG = 180 / math.pi
-# learned parameter: (display unit, factor from SI); speed and ratio are factors on the configured values
+# learned parameter: (display unit, factor from SI); speed, ratio, front and rear are factors on the configured values
 CALIBRATION_UNITS = {"speed": ("x", 1.0), "gyro_bias": ("deg/s", DEG), "ay_bias": ("m/s^2", 1.0),
                      "steering_offset": ("deg", DEG), "ratio": ("x", 1.0), "understeer": ("deg/(m/s^2)", DEG),
-                     "ax_bias": ("m/s^2", 1.0)}
+                     "ax_bias": ("m/s^2", 1.0), "front": ("x", 1.0), "rear": ("x", 1.0)}
 
 
 def calibration_state(page: dict) -> str:

@@ -7,7 +7,7 @@ from pathlib import Path
 
 from tqdm import tqdm
 
-from canest.apps.calibrate import calibrate, optimizer
+from canest.models.output_error import calibrate, optimizer
 from canest.calibration import SHARED
 from canest.apps.calibrated_config import bank_lines, check_new, write_calibrated
 from canest.apps.drive_signals import check_signals, read_drive

@@ -15,7 +15,7 @@ EPILOG = """examples:
 Shows each estimate with its standard deviation and validity, the status
 message (filter, mode, missing inputs, resets, NIS), the online calibration
 (one line per learned parameter: value, std, state prior/learning/converged;
-angles in deg, speed and ratio as factors) and the stream's own health: frame
+angles in deg, speed, ratio, front and rear as factors) and the stream's own health: frame
 rate, CRC failures and rolling-counter gaps. On a terminal the view is redrawn
 in place; when standard output is not a terminal (a pipe, a file) each
 refresh is one line: frames=N mode=M vx=... yaw_rate=... (a state flagged

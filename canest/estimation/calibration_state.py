@@ -8,7 +8,9 @@ never half of either. :meth:`CalibrationStore.load` multiplies every variance by
 ``RELOAD_INFLATION`` (the car may have changed while off: tires, load, a
 steering alignment); a file that cannot be read, is not the format, or holds a
 value outside its parameter's bounds is ignored with one warning naming the
-file, and learning starts afresh.
+file, and learning starts afresh. A parameter the file does not hold (one a
+newer canest learns than the one that wrote it) starts from its prior, the
+others are restored, and one line says which.
 """
 from __future__ import annotations
 
@@ -56,13 +58,18 @@ class CalibrationStore:
         except (OSError, UnicodeDecodeError, ValueError) as exc:
             log.warning("ignoring the calibration state file %s: %s; learning from scratch", self.path, exc)
             return None
+        missing = [spec.name for spec in specs if spec.name not in parameters]
+        if missing:
+            log.info("%s holds no %s (written by an older canest): learning them from their prior", self.path,
+                     ", ".join(missing))
         for entry in parameters.values():
             entry["variance"] *= RELOAD_INFLATION
         return parameters
 
 
 def _checked(document, specs) -> dict:
-    """The parameters of a state document, every one present, finite and within its bounds; else ValueError."""
+    """The parameters of a state document that ``specs`` names, each finite and within its bounds, at least one;
+    else ValueError. One the document lacks is left out."""
     if not isinstance(document, dict) or document.get("version") != VERSION:
         raise ValueError(f"not a version {VERSION} calibration state")
     saved = document.get("parameters")
@@ -71,6 +78,8 @@ def _checked(document, specs) -> dict:
     parameters = {}
     for spec in specs:
         entry = saved.get(spec.name)
+        if entry is None:
+            continue
         if not isinstance(entry, dict) or not all(_finite_number(entry.get(f)) for f in FIELDS):
             raise ValueError(f"parameter '{spec.name}' lacks a finite {', '.join(FIELDS)}")
         for f in ("value", "applied"):
@@ -79,6 +88,8 @@ def _checked(document, specs) -> dict:
         if entry["variance"] <= 0.0 or entry["evidence"] < 0.0:
             raise ValueError(f"{spec.name}: variance must be above 0 and evidence at least 0")
         parameters[spec.name] = {f: float(entry[f]) for f in FIELDS}
+    if not parameters:
+        raise ValueError("no parameter canest learns")
     return parameters
 
 

@@ -37,6 +37,7 @@ from __future__ import annotations
 import logging
 import math
 import time
+from dataclasses import replace
 
 import numpy as np
 
@@ -116,6 +117,19 @@ class Estimator:
         self.gyro_holds = {row: (name, GyroHold()) for row, name in enumerate(model.measurement_names)
                            if name in GYROS}
         self.steering_zero = steering_zero(config)
+        self.stiffness = (1.0, 1.0)  # factors on the configured cornering stiffnesses (:meth:`use_stiffness`)
+
+    def use_stiffness(self, front: float, rear: float) -> None:
+        """Run the model and judge the sideslip with the configured cornering stiffnesses times ``front`` and
+        ``rear`` (the online calibration's applied factors); the filter's state is kept."""
+        if (front, rear) == self.stiffness:
+            return
+        self.stiffness = (front, rear)
+        p = self.config.vehicle
+        self.vehicle = replace(p, cornering_stiffness_front=front * p.cornering_stiffness_front,
+                               cornering_stiffness_rear=rear * p.cornering_stiffness_rear)
+        self.model.use_vehicle(self.vehicle)
+        self.judge.use_vehicle(self.vehicle)
 
     def reset(self) -> None:
         """Forget the state: the next tick with inputs initializes a new filter."""

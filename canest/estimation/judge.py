@@ -37,6 +37,13 @@ class StateJudge:
         self.linear_tires = getattr(model, "linear_tires", False)
         self.sources = [SOURCES.get(name, (name,))[0] for name in model.measurement_names]  # input behind each channel
 
+    def use_vehicle(self, vehicle) -> None:
+        """Judge with ``vehicle``'s cornering stiffnesses (the online calibration's): the sideslip's model error and
+        the linear regime's steady yaw rate."""
+        self.vehicle = vehicle
+        if self.regime is not None:
+            self.regime.understeer = vehicle.understeer_gradient
+
     def reset(self) -> None:
         self.consistency.reset()
         self.kinematic.reset()

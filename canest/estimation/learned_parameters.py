@@ -1,4 +1,8 @@
-"""The parameters the online calibration learns: start, prior std, physical bounds, drift, convergence, rate."""
+"""The parameters the online calibration learns: start, prior std, physical bounds, drift, convergence, rate.
+
+``front`` and ``rear`` are factors on the configured cornering stiffnesses (learned from windows of driving by
+:mod:`canest.estimation.stiffness_window`); the others are learned by the identities of
+:mod:`canest.estimation.online_calibration`."""
 from __future__ import annotations
 
 import math
@@ -32,9 +36,12 @@ def parameters(vehicle: VehicleParams) -> tuple:
         Learned("ratio", 1.0, 0.1, 0.5, 2.0, 0.002, 0.03, 0.025),
         Learned("understeer", vehicle.understeer_gradient, 0.003, -0.01, 0.02, 0.0001, 0.0005, 0.0),
         Learned("ax_bias", 0.0, 0.3, -2.0, 2.0, 0.01, 0.03, 0.1),
+        Learned("front", 1.0, 0.3, 0.5, 2.0, 0.02, 0.05, 0.05),
+        Learned("rear", 1.0, 0.3, 0.5, 2.0, 0.02, 0.05, 0.05),
     )
 
 
-NAMES = ("speed", "gyro_bias", "ay_bias", "steering_offset", "ratio", "understeer", "ax_bias")
-SPEED, GYRO, AY, OFFSET, RATIO, UNDERSTEER, AX = range(len(NAMES))
-APPLIED = (SPEED, GYRO, AY, OFFSET, RATIO, AX)
+NAMES = ("speed", "gyro_bias", "ay_bias", "steering_offset", "ratio", "understeer", "ax_bias", "front", "rear")
+SPEED, GYRO, AY, OFFSET, RATIO, UNDERSTEER, AX, FRONT, REAR = range(len(NAMES))
+APPLIED = (SPEED, GYRO, AY, OFFSET, RATIO, AX, FRONT, REAR)
+STIFFNESS = (FRONT, REAR)  # factors on the configured cornering stiffnesses, learned by the window fit

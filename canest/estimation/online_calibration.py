@@ -55,8 +55,9 @@ import numpy as np
 from canest.estimation.calibration_blocks import Block, BlockMeans
 from canest.estimation.calibration_state import CalibrationStore
 from canest.estimation.inputs import WHEEL_SPEEDS
-from canest.estimation.learned_parameters import (APPLIED, AX, AY, GYRO, NAMES, OFFSET, RATIO, SPEED, UNDERSTEER,
-                                                  parameters)
+from canest.estimation.learned_parameters import (APPLIED, AX, AY, FRONT, GYRO, NAMES, OFFSET, RATIO, REAR, SPEED,
+                                                  STIFFNESS, UNDERSTEER, parameters)
+from canest.estimation.stiffness_window import StiffnessWindow
 from canest.models import identities
 from canest.params import VehicleParams
 from canest.settings import Config
@@ -74,6 +75,7 @@ STANDSTILL = 0.05  # m/s
 GATE = 4.0  # innovation standard deviations
 MIN_EVIDENCE = 30.0  # s of excited blocks before a parameter counts as converged
 APPLY_EVIDENCE = 10.0  # s of excited blocks before a parameter is applied (gyro bias, offsets: once converged)
+STIFFNESS_FLOOR = 0.03  # std of a window fit's stiffness factor beyond its interval: the linear tire's model error
 NOISE = {"kinematic": 0.1, "steering": math.radians(0.5), "longitudinal": 0.1,  # per block, widened for the
          "standstill": math.radians(0.05)}  # errors' correlation in time and the identities' model error
 SECONDS_PER_HOUR = 3600.0
@@ -102,7 +104,8 @@ class OnlineCalibration:
         self.history = deque(maxlen=HISTORY + 1)
         self.store = store
         self.last_save = None
-        self.updates = {"kinematic": 0, "steering": 0, "longitudinal": 0, "standstill": 0, "gated": 0}
+        self.updates = {"kinematic": 0, "steering": 0, "longitudinal": 0, "standstill": 0, "stiffness": 0, "gated": 0}
+        self.window = StiffnessWindow(vehicle, names, dt) if self.enabled else None
         if store is not None and self.enabled:
             saved = store.load(self.specs)
             if saved is not None:
@@ -225,6 +228,20 @@ class OnlineCalibration:
             learns = (OFFSET, RATIO, UNDERSTEER)
         self._update(block.steering_wheel_angle, h, H, NOISE["steering"], "steering", learns)
 
+    def _stiffness_update(self, fit) -> None:
+        """The window fit's two stiffness factors as one measurement (:mod:`canest.estimation.stiffness_window`).
+
+        Its covariance (the fit's interval, widened by ``STIFFNESS_FLOOR``: on the simulator the linear fit reads
+        the plant's tires 2-3 % soft) is whitened by its Cholesky factor, so two scalar updates make the joint one.
+        Windows never overlap, so each fit is new evidence; it counts the window's seconds."""
+        R = fit.covariance + STIFFNESS_FLOOR**2 * np.eye(2)
+        whiten = np.linalg.inv(np.linalg.cholesky(R))
+        rows = np.zeros((2, len(self.x)))
+        rows[:, list(STIFFNESS)] = whiten
+        for z, H in zip(whiten @ fit.values, rows):
+            self._update(float(z), float(H @ self.x), H, 1.0, "stiffness", learns=STIFFNESS)
+        self.evidence[list(STIFFNESS)] += fit.seconds
+
     def _follow(self) -> None:
         """Move each applied parameter toward its learned value, rate-limited, once ``APPLY_EVIDENCE`` s excited it.
 
@@ -263,6 +280,9 @@ class OnlineCalibration:
         """Learn from the raw ``sample`` (one tick), then return a copy with the applied corrections."""
         if not self.enabled:
             return sample
+        fit = self.window.add(sample)
+        if fit is not None:
+            self._stiffness_update(fit)
         block = self.blocks.add(sample)
         if block is not None:
             self._report = None
@@ -286,6 +306,11 @@ class OnlineCalibration:
         swa = index["steering_wheel_angle"]
         values[swa] = float(identities.road_wheel_angle(values[swa], a[OFFSET], a[RATIO]))
         return replace(sample, values=values)
+
+    @property
+    def stiffness(self) -> tuple:
+        """The applied factors on the configured front and rear cornering stiffnesses (the model's, not an input's)."""
+        return float(self.applied[FRONT]), float(self.applied[REAR])
 
     def report(self) -> MappingProxyType:
         """Per parameter: ``calib_<name>`` (the learned value), ``_std``, ``_applied``, ``_learned`` (driving excited
@@ -315,11 +340,14 @@ class OnlineCalibration:
                        "applied": float(self.applied[i])} for i, name in enumerate(NAMES)}
 
     def restore(self, saved: dict) -> None:
-        """Take a checked saved state (:meth:`CalibrationStore.load` inflated its variances)."""
+        """Take a checked saved state (:meth:`CalibrationStore.load` inflated its variances); a parameter it lacks
+        keeps its prior."""
         for i, name in enumerate(NAMES):
-            entry = saved[name]
-            self.x[i], self.evidence[i], self.applied[i] = entry["value"], entry["evidence"], entry["applied"]
-        variances = np.array([saved[name]["variance"] for name in NAMES])
+            if name in saved:
+                entry = saved[name]
+                self.x[i], self.evidence[i], self.applied[i] = entry["value"], entry["evidence"], entry["applied"]
+        variances = np.array([saved[name]["variance"] if name in saved else spec.std**2
+                              for name, spec in zip(NAMES, self.specs)])
         k, understeer = self.x[RATIO], self.x[UNDERSTEER]
         self.x[UNDERSTEER] = k * understeer  # the state's u = k K_us, its variance as if k and K_us were independent:
         variances[UNDERSTEER] = k * k * variances[UNDERSTEER] + understeer**2 * variances[RATIO]  # K_us's std grows
@@ -336,9 +364,11 @@ class OnlineCalibration:
             self.last_save = t
 
     def close(self) -> None:
-        """Save now (at shutdown)."""
+        """Save now (at shutdown) and stop the stiffness window's worker."""
         if self.store is not None and self.enabled:
             self.store.save(self.state())
+        if self.window is not None:
+            self.window.close()
 
 
 def make_calibration(config: Config, names: tuple) -> OnlineCalibration:

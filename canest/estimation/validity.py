@@ -187,10 +187,8 @@ class LinearRegime:
     """Whether the measured yaw rate follows the linear steady-state yaw rate of the steering (tires not saturated)."""
 
     def __init__(self, vehicle, dt: float):
-        cf, cr = vehicle.cornering_stiffness_front, vehicle.cornering_stiffness_rear
         self.wheelbase = vehicle.wheelbase
-        self.understeer = vehicle.mass * (vehicle.cg_to_rear * cr - vehicle.cg_to_front * cf) / (
-            vehicle.wheelbase * cf * cr)
+        self.understeer = vehicle.understeer_gradient
         self.blend = dt / (REGIME_LAG + dt)
         self.reference = None
 

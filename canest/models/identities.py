@@ -3,7 +3,7 @@
 Signs are ISO 8855 (x forward, y left, z up; yaw rate, lateral acceleration
 and steering angles positive to the left). Two slopes are not ISO angles but
 the conventions of :mod:`canest.sim.mismatch` and the offline fit
-(:mod:`canest.apps.calibrate`): ``bank`` positive when the road falls to the
+(:mod:`canest.models.output_error`): ``bank`` positive when the road falls to the
 left (that is *minus* the ISO roll of the road, which is positive left side
 up) and ``grade`` positive when the road rises ahead (*minus* the ISO pitch,
 which is positive nose down). What the sensors measure: an accelerometer the

@@ -63,6 +63,10 @@ class SingleTrackModel:
     vx_noise_key = "vx_from_ax"  # vx integrates the measured ax (eq 3): its process noise is the accelerometer's
 
     def __init__(self, vehicle: VehicleParams):
+        self.use_vehicle(vehicle)
+
+    def use_vehicle(self, vehicle: VehicleParams) -> None:
+        """Take ``vehicle``'s parameters (the online calibration's learned cornering stiffnesses)."""
         self.vehicle = vehicle
         cf, cr = vehicle.cornering_stiffness_front, vehicle.cornering_stiffness_rear
         a, b, m, iz = vehicle.cg_to_front, vehicle.cg_to_rear, vehicle.mass, vehicle.yaw_inertia

@@ -60,8 +60,12 @@ class TireForceModel:
     sensor_sets = SENSOR_SETS
 
     def __init__(self, vehicle: VehicleParams, tire: TireModelParams = TireModelParams()):
-        self.vehicle = vehicle
         self.tire = tire
+        self.use_vehicle(vehicle)
+
+    def use_vehicle(self, vehicle: VehicleParams) -> None:
+        """Take ``vehicle``'s parameters (the online calibration's learned cornering stiffnesses)."""
+        self.vehicle = vehicle
         self.wheels = WheelGeometry(vehicle)
 
     def longitudinal_forces(self, X: np.ndarray, u: np.ndarray) -> np.ndarray:

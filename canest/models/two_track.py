@@ -53,8 +53,12 @@ class TwoTrackModel:
     parameter_bounds = (LOWEST_FRICTION, HIGHEST_FRICTION)
 
     def __init__(self, vehicle: VehicleParams, tire: TireModelParams = TireModelParams()):
-        self.vehicle = vehicle
         self.tire = tire
+        self.use_vehicle(vehicle)
+
+    def use_vehicle(self, vehicle: VehicleParams) -> None:
+        """Take ``vehicle``'s parameters (the online calibration's learned cornering stiffnesses)."""
+        self.vehicle = vehicle
         self.wheels = WheelGeometry(vehicle)
 
     def forces(self, X: np.ndarray, u: np.ndarray, stiffness_scale=1.0):

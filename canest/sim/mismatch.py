@@ -101,7 +101,7 @@ def true_vehicle(config_vehicle: VehicleParams, mismatch: PlantMismatch,
 
 
 def true_fit(config_vehicle: VehicleParams, mismatch: PlantMismatch, banks=(0.0,)) -> Fit:
-    """The calibration that would be exact for this car (intervals 0), in the terms of :mod:`canest.apps.calibrate`;
+    """The calibration that would be exact for this car (intervals 0), in the terms of :mod:`canest.models.output_error`;
     ``banks`` (rad) per log. Written with :func:`canest.apps.calibrated_config.write_calibrated` it is the right
     config, the baseline a calibrated one is measured against."""
     truth = true_vehicle(config_vehicle, mismatch)

@@ -1,9 +1,11 @@
-"""Offline calibration: the vehicle and sensor parameters that make the single-track model fit logged drives.
+"""The vehicle and sensor parameters that make the single-track model fit drives: ``canest calibrate`` fits
+logs with it (:mod:`canest.apps.drive_signals` reads them), the online calibration windows of driving
+(:mod:`canest.estimation.stiffness_window`).
 
 Output error: the linear single-track model (states vy, yaw rate and the two
 axles' lateral forces, which follow their slip angles over the config's tire
 ``relaxation_length``; RK4 at
-:data:`canest.apps.drive_signals.STEP`) is driven by the measured steering
+:data:`STEP`) is driven by the measured steering
 wheel angle and wheel speed of every log and predicts the measured yaw rate
 and lateral acceleration; :func:`scipy.optimize.least_squares` moves the
 parameters until the predictions fit, over all logs at once (scipy: the
@@ -50,21 +52,52 @@ in time (an AR(1) fit: neighbouring 20 ms samples are not independent errors).
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
-from canest.apps.drive_signals import STEP, Drive
 from canest.calibration import BANK, SHARED, Fit
 from canest.errors import DependencyError
 from canest.models.wheels import GRAVITY
 from canest.params import VehicleParams
 
+STEP = 0.02  # s: 50 Hz, fast enough for a car's yaw dynamics (eigenvalues below 15 1/s at 50-100 km/h)
+MIN_SPEED = 8.0  # m/s: slower, the slip angles are large and the linear single-track model does not hold
+MIN_SEGMENT = 2.0  # s: shorter stretches of usable driving are left out (their start transient is all they hold)
 SETTLE = 1.0  # s at the start of each stretch left out of the fit: the model starts from vy = 0
 LINEAR_AY = 2.0  # m/s^2: ticks of more measured lateral acceleration are left out of the fit (the model still runs
 # through them): the tires' force there falls short of linear, by the curve and by the load transfer
 MEAN_BANK_STD = math.radians(0.01)  # rad: the prior that holds the logs' mean bank at 0
 CONFIDENCE = 1.96  # 95 % two-sided
+INSTALL = "pip install 'canest[calibrate]'"
 DIFF_STEP = 1e-6  # forward-difference step, in units of each parameter's scale
+
+
+@dataclass
+class Drive:
+    """One drive's usable ticks at ``STEP``: SI arrays of equal length, and where a new stretch starts."""
+
+    path: str
+    t: np.ndarray
+    steering_wheel_angle: np.ndarray  # rad
+    yaw_rate: np.ndarray  # rad/s
+    ay: np.ndarray  # m/s^2
+    wheel_speed: np.ndarray  # m/s: the four wheels' mean (without their drive slip where torques are mapped)
+    starts: np.ndarray  # bool: the first tick of a stretch
+
+    @property
+    def seconds(self) -> float:
+        return len(self.t) * STEP
+
+
+def drive_of_rows(path, rows) -> Drive:
+    """The :class:`Drive` of rows ``(t, swa, yaw rate, ay, wheel speed, start)``, stretches shorter than
+    ``MIN_SEGMENT`` left out."""
+    table = np.array(rows, dtype=float).reshape(-1, 6)
+    starts = table[:, 5].astype(bool)
+    ids = np.cumsum(starts)
+    table = table[(np.bincount(ids)[ids] * STEP >= MIN_SEGMENT) & (ids > 0)]
+    return Drive(str(path), *table[:, :5].T, table[:, 5].astype(bool))
 
 
 class SingleTrackFit:
@@ -168,7 +201,7 @@ def _widening(errors: np.ndarray) -> float:
 
 def optimizer():
     """scipy.optimize, or a DependencyError naming the extra that installs it (scipy is not a core dependency)."""
-    return DependencyError.require("scipy.optimize", "canest calibrate", "pip install 'canest[calibrate]'")
+    return DependencyError.require("scipy.optimize", "canest calibrate", INSTALL)
 
 
 def calibrate(vehicle: VehicleParams, drives: list, progress=None) -> Fit:
