@@ -57,6 +57,7 @@ class Pipeline:
         sample = self.calibration.correct(self.leveling.level(self.resampler.sample(tick)))
         if self.calibration.enabled:
             self.estimator.use_stiffness(*self.calibration.stiffness)
+            self.estimator.use_kinematic_offsets(*self.calibration.kinematic_offsets)
         estimate = self.estimator.step(sample)
         if self.calibration.enabled:
             estimate.calibration = self.calibration.report()

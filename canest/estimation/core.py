@@ -131,6 +131,11 @@ class Estimator:
         self.model.use_vehicle(self.vehicle)
         self.judge.use_vehicle(self.vehicle)
 
+    def use_kinematic_offsets(self, ay: float, yaw_rate: float) -> None:
+        """The online calibration's learned ay and yaw-rate offsets not yet applied to the inputs, for the
+        kinematic checks (:meth:`StateJudge.use_kinematic_offsets`)."""
+        self.judge.use_kinematic_offsets(ay, yaw_rate)
+
     def reset(self) -> None:
         """Forget the state: the next tick with inputs initializes a new filter."""
         self.filter = None

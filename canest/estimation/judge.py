@@ -33,6 +33,7 @@ class StateJudge:
         self.kinematic = validity.KinematicCheck(dt)
         self.lateral_drift = validity.LateralDrift(dt)
         self.sideslip_known = False  # the sideslip was valid on the last tick
+        self.kinematic_offsets = (0.0, 0.0)  # ay, yaw rate (:meth:`use_kinematic_offsets`)
         self.gyros = [n for n in validity.OBSERVED_BY["yaw_rate"] if n in model.measurement_names]  # the measured ones
         self.linear_tires = getattr(model, "linear_tires", False)
         self.sources = [SOURCES.get(name, (name,))[0] for name in model.measurement_names]  # input behind each channel
@@ -89,8 +90,19 @@ class StateJudge:
         if not inputs.has("ay", "yaw_rate"):
             self.lateral_drift.reset()
             return 0.0
-        return self.lateral_drift.update(inputs.values["ay"], inputs.values["yaw_rate"], vx, beta, vx_measured,
-                                         self.sideslip_known, abs(vx) * beta_std / math.cos(beta) ** 2)
+        ay, yaw_rate = self._kinematic_inputs(inputs)
+        return self.lateral_drift.update(ay, yaw_rate, vx, beta, vx_measured, self.sideslip_known,
+                                         abs(vx) * beta_std / math.cos(beta) ** 2)
+
+    def use_kinematic_offsets(self, ay: float, yaw_rate: float) -> None:
+        """Offsets still in the inputs' ay and yaw rate that the kinematic identity ``ay - c = v (r - b) + dvy/dt``
+        has learned (the online calibration's, not yet applied to the inputs): the kinematic checks take them out."""
+        self.kinematic_offsets = (ay, yaw_rate)
+
+    def _kinematic_inputs(self, inputs) -> tuple:
+        """ay and yaw rate as the kinematic identity holds them: the inputs less :meth:`use_kinematic_offsets`'."""
+        ay_offset, yaw_offset = self.kinematic_offsets
+        return inputs.values["ay"] - ay_offset, inputs.values["yaw_rate"] - yaw_offset
 
     def widen(self, std: np.ndarray, index: dict, ratios: dict, beta_model_std: float,
               drift: float = 0.0) -> np.ndarray:
@@ -144,7 +156,6 @@ class StateJudge:
         if cause != "valid":
             self.kinematic.reset()
             return cause
-        yaw_rate = inputs.values["yaw_rate"]
-        moving_as_measured = self.kinematic.inside(beta, inputs.values["ay"], yaw_rate, vx)
-        in_regime = self.regime is None or self.regime.inside(delta, vx, yaw_rate)
+        moving_as_measured = self.kinematic.inside(beta, *self._kinematic_inputs(inputs), vx)
+        in_regime = self.regime is None or self.regime.inside(delta, vx, inputs.values["yaw_rate"])
         return "valid" if moving_as_measured and in_regime else "model_regime"
