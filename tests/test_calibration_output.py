@@ -159,6 +159,21 @@ def test_an_incomplete_calibration_message_is_named(tmp_path):
         EstimateEncoder(dbc)
 
 
+def older_dbc(path):
+    """The reference output DBC as an older canest wrote it: no pages for the cornering stiffnesses."""
+    def edit(db):
+        for signal in ("CalFront", "CalFrontStd", "CalRear", "CalRearStd"):
+            without_signal(CALIBRATION_MESSAGE, signal)(db)
+    return edited_dbc(path, edit)
+
+
+def test_an_older_dbc_without_the_stiffness_pages_works_and_sends_the_pages_it_has(estimates, tmp_path):
+    encoder = EstimateEncoder(older_dbc(tmp_path / "older.dbc"))
+    pages = decoded_pages(encoder.encode(tick(0.0, estimates[1])))
+    assert [page["CalParameter"] for page in pages] == [NAMES.index(n) for n in NAMES if n not in ("front", "rear")]
+    assert encoder.calibration_missing == ["front", "rear"]
+
+
 def check_output(capsys, config_path, *options):
     with pytest.raises(SystemExit) as exit_status:
         main(["check", "--config", str(config_path), *options])
@@ -179,6 +194,10 @@ def test_check_notes_once_that_a_dbc_without_the_message_sends_no_calibration(ca
     assert json.loads(check_output(capsys, mine, "--json"))["calibration_sent"] is False
     assert "CE_Calibration" not in check_output(capsys, CONFIG)
     assert json.loads(check_output(capsys, CONFIG, "--json"))["calibration_sent"] is True
+    doc["output"]["dbc"] = str(older_dbc(tmp_path / "older.dbc"))
+    mine.write_text(yaml.safe_dump(doc))
+    assert check_output(capsys, mine).count("has no page for front, rear (a DBC of an older canest)") == 1
+    assert json.loads(check_output(capsys, mine, "--json"))["calibration_not_sent"] == ["front", "rear"]
 
 
 # -- monitor -----------------------------------------------------------------------------------------------------------

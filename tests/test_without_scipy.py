@@ -112,5 +112,6 @@ print(first.calibration.enabled, first.calibration.window.enabled, second.calibr
     result = run(tmp_path, "-c", code)
     assert result.returncode == 0, result.stderr
     assert result.stdout.split() == ["True", "False", "False"]
-    assert result.stderr.count("learning the cornering stiffnesses online needs the Python package") == 1
+    assert result.stderr.count("the cornering stiffnesses are not learned online without the Python package 'scipy'") \
+        == 1
     assert INSTALL in result.stderr

@@ -16,7 +16,7 @@ from canest.estimation.inputs import WHEEL_SPEEDS, TickInputs
 from canest.estimation.leveling import AccelerometerLeveling
 from canest.estimation.reference_speed import TORQUES, slip_free_speed, tick_usage
 from canest.io.logfiles import open_log
-from canest.models.output_error import MIN_SEGMENT, MIN_SPEED, STEP, drive_of_rows
+from canest.models.output_error import MIN_SEGMENT, MIN_SPEED, STEP, Drive, drive_of_rows
 from canest.models.wheels import WheelGeometry
 from canest.params import VehicleParams
 from canest.resample import Resampler, TickClock

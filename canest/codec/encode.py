@@ -62,6 +62,12 @@ def calibration_signal(name: str) -> str:
     return "Cal" + "".join(part.capitalize() for part in name.split("_"))
 
 
+def calibration_pages_missing(signals) -> list:
+    """The learned parameters whose page a ``CE_Calibration`` with ``signals`` (names) lacks whole, value and std
+    (an older canest's DBC, before a parameter was learned): not sent. A page with one of the two is a gap."""
+    return [n for n in NAMES if not {calibration_signal(n), f"{calibration_signal(n)}Std"} & set(signals)]
+
+
 def integrity_signals(message):
     """The rolling counter and checksum signals of an output message (``*_Counter``, ``*_CRC``)."""
     counter = next(s for s in message.signals if s.name.endswith("_Counter"))
@@ -74,9 +80,11 @@ def contract_gaps(database, broken=None) -> list:
     which of its messages are ``broken`` ({message name: problem})."""
     required = {**{name: list(fields) for name, fields in OUTPUT_MESSAGES.items()},
                 STATUS_MESSAGE: list(STATUS_SIGNALS), CAUSE_MESSAGE: list(CAUSE_SIGNALS)}
-    if CALIBRATION_MESSAGE in {m.name for m in database.messages}:  # optional, but complete when there
+    if CALIBRATION_MESSAGE in {m.name for m in database.messages}:  # optional; each page it has complete
+        present = {s.name for s in database.get_message_by_name(CALIBRATION_MESSAGE).signals}
+        pages = [n for n in NAMES if n not in calibration_pages_missing(present)]
         required[CALIBRATION_MESSAGE] = [CALIBRATION_PAGE, "CalLearned", "CalConverged",
-                                         *(f"{calibration_signal(n)}{std}" for n in NAMES for std in ("", "Std"))]
+                                         *(f"{calibration_signal(n)}{std}" for n in pages for std in ("", "Std"))]
     gaps = []
     for name, signals in required.items():
         try:
@@ -135,8 +143,10 @@ class EstimateEncoder:
         self.mode_ids = {str(v): k for k, v in status["Mode"].choices.items()}
         self.last_causes, self.next_causes = None, -float("inf")  # CE_ValidityCause: on change, else at its cycle
         self.has_calibration = CALIBRATION_MESSAGE in {m.name for m in self.database.messages}
+        self.calibration_missing = []  # learned parameters the DBC's CE_Calibration has no page for
         if self.has_calibration:
             self.senders[CALIBRATION_MESSAGE] = _Sender(self.database.get_message_by_name(CALIBRATION_MESSAGE))
+            self.calibration_missing = calibration_pages_missing(self.senders[CALIBRATION_MESSAGE].signals)
         self.next_calibration = -float("inf")
 
     def encode(self, estimate: Estimate) -> list:
@@ -175,11 +185,13 @@ class EstimateEncoder:
         return frames
 
     def _calibration_frames(self, estimate: Estimate) -> list:
-        """One ``CE_Calibration`` page per learned parameter: value, std, learned and converged flags."""
+        """One ``CE_Calibration`` page per learned parameter the DBC has: value, std, learned and converged flags."""
         sender = self.senders[CALIBRATION_MESSAGE]
         self.next_calibration = estimate.t + sender.cycle_time
         frames = []
         for page, name in enumerate(NAMES):
+            if name in self.calibration_missing:
+                continue
             signal, report = calibration_signal(name), estimate.calibration
             frames.append(sender.frame({
                 CALIBRATION_PAGE: page,

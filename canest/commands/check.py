@@ -30,7 +30,8 @@ model, factorization: cholesky, svd or null for the EKFs, rate_hz,
 min_speed, online_calibration), signals (canonical, message, signals, frame_id, cycle_time,
 cycle_time_from, timeout, unit, factor, offset, overrides), integrity,
 tolerated, missing_inputs, range_warnings, raw_range_warnings,
-calibration_sent (the output DBC carries CE_Calibration and the learner is on), ok.
+calibration_sent (the output DBC carries CE_Calibration and the learner is on), calibration_not_sent (the learned
+parameters its CE_Calibration has no page for), ok.
 Exit status 0 when the config is usable, 2 when it is not."""
 
 
@@ -102,6 +103,7 @@ def _report(config, decoder, encoder) -> dict:
         "range_warnings": input_shortfalls(config.signals) + output_shortfalls(encoder.database),
         "raw_range_warnings": raw_range_warnings(config.signals, decoder.database),
         "calibration_sent": encoder.has_calibration and e.online_calibration,
+        "calibration_not_sent": encoder.calibration_missing if encoder.has_calibration else [],
         "ok": True,
     }
 
@@ -143,6 +145,10 @@ def _print(report: dict) -> None:
     if not report["calibration_sent"] and report["filter"]["online_calibration"]:
         print(f"\nnote: {report['output']['dbc']} has no {CALIBRATION_MESSAGE} message: the online calibration is "
               "learned and applied but not sent (add the message from dbc/canest_estimates.dbc)")
+    elif report["calibration_not_sent"] and report["filter"]["online_calibration"]:
+        print(f"\nnote: {report['output']['dbc']}'s {CALIBRATION_MESSAGE} has no page for "
+              f"{', '.join(report['calibration_not_sent'])} (a DBC of an older canest): learned and applied but not "
+              "sent (add their signals from dbc/canest_estimates.dbc)")
     print("\nOK")
 
 

@@ -130,6 +130,7 @@ class Estimator:
                                cornering_stiffness_rear=rear * p.cornering_stiffness_rear)
         self.model.use_vehicle(self.vehicle)
         self.judge.use_vehicle(self.vehicle)
+        self.steering_zero.use_vehicle(self.vehicle)
 
     def use_kinematic_offsets(self, ay: float, yaw_rate: float) -> None:
         """The online calibration's learned ay and yaw-rate offsets not yet applied to the inputs, for the

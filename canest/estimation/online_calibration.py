@@ -42,9 +42,15 @@ the inputs, so every model gains from it: wheel speeds times ``speed``, yaw
 rate less ``gyro_bias``, ay less ``ay_bias``, ax less ``ax_bias``, steering
 angle ``(swa - offset) / ratio``. ``understeer`` is learned and reported but
 not applied: it fixes only the balance of the two cornering stiffnesses.
+
+``front`` and ``rear``, the two cornering stiffnesses (factors on the configured ones), come from another
+source: the output-error fit of each 30 s window of driving, run in a worker
+(:mod:`canest.estimation.stiffness_window`, :meth:`_stiffness_update`). They are applied to the model, not the
+inputs (:attr:`stiffness`, ``Estimator.use_stiffness``).
 """
 from __future__ import annotations
 
+import logging
 import math
 from collections import deque
 from dataclasses import replace
@@ -62,6 +68,8 @@ from canest.models import identities
 from canest.params import VehicleParams
 from canest.settings import Config
 
+log = logging.getLogger("canest.calibration")
+
 BLOCK = 0.1  # s: one learner update per block of ticks (10 Hz)
 HISTORY = 4  # blocks kept for the rates (0.4 s)
 MIN_SPEED = 5.0  # m/s
@@ -75,6 +83,7 @@ STANDSTILL = 0.05  # m/s
 GATE = 4.0  # innovation standard deviations
 MIN_EVIDENCE = 30.0  # s of excited blocks before a parameter counts as converged
 APPLY_EVIDENCE = 10.0  # s of excited blocks before a parameter is applied (gyro bias, offsets: once converged)
+REOPEN_AFTER = 3  # window fits gated in a row before the stiffnesses are relearned
 STIFFNESS_FLOOR = 0.03  # std of a window fit's stiffness factor beyond its interval: the linear tire's model error
 NOISE = {"kinematic": 0.1, "steering": math.radians(0.5), "longitudinal": 0.1,  # per block, widened for the
          "standstill": math.radians(0.05)}  # errors' correlation in time and the identities' model error
@@ -106,6 +115,8 @@ class OnlineCalibration:
         self.last_save = None
         self.updates = {"kinematic": 0, "steering": 0, "longitudinal": 0, "standstill": 0, "stiffness": 0, "gated": 0}
         self.window = StiffnessWindow(vehicle, names, dt) if self.enabled else None
+        self.gated_fits = 0  # window fits gated in a row
+        self.kinematic_offsets = (0.0, 0.0)  # ay, yaw rate: :meth:`_kinematic_offsets`, once per block
         if store is not None and self.enabled:
             saved = store.load(self.specs)
             if saved is not None:
@@ -135,8 +146,10 @@ class OnlineCalibration:
         """Per parameter: std below its threshold after ``MIN_EVIDENCE`` s of excitation."""
         return (self.std < np.array([p.converged for p in self.specs])) & (self.evidence >= MIN_EVIDENCE)
 
-    def _update(self, z: float, h: float, H: np.ndarray, noise: float, kind: str, learns=None) -> None:
-        """One scalar Kalman update (Joseph form), left out beyond ``GATE``; counts the excited parameters.
+    def _update(self, z: float, h: float, H: np.ndarray, noise: float, kind: str, learns=None,
+                gate: bool = True) -> None:
+        """One scalar Kalman update (Joseph form), left out beyond ``GATE`` (unless ``gate`` is False: a caller
+        that gated the update as a whole); counts the excited parameters.
 
         ``learns`` (indices; default all) are the parameters the update may move: the others are *considered*
         (Schmidt-Kalman): their uncertainty widens the innovation's variance and their covariance with the learned
@@ -147,7 +160,7 @@ class OnlineCalibration:
         PH = self.P @ H
         S = float(H @ PH) + R
         innovation = z - h
-        if innovation * innovation > GATE * GATE * S:
+        if gate and innovation * innovation > GATE * GATE * S:
             self.updates["gated"] += 1
             return
         K = PH / S
@@ -232,15 +245,38 @@ class OnlineCalibration:
         """The window fit's two stiffness factors as one measurement (:mod:`canest.estimation.stiffness_window`).
 
         Its covariance (the fit's interval, widened by ``STIFFNESS_FLOOR``: on the simulator the linear fit reads
-        the plant's tires 2-3 % soft) is whitened by its Cholesky factor, so two scalar updates make the joint one.
-        Windows never overlap, so each fit is new evidence; it counts the window's seconds."""
+        the plant's tires 2-3 % soft) is whitened by its Cholesky factor, so two scalar updates make the joint one
+        (checked against the joint update to 1e-16). The gate is the pair's: left out whole when its normalized
+        innovation squared exceeds ``GATE`` squared (a row gated alone would let the second row, conditioned on
+        the first, move the learned value away from the fit). Windows never overlap, so each fit used is new
+        evidence: it counts the window's seconds. ``REOPEN_AFTER`` fits gated in a row (new tires, a new load)
+        reopen the stiffnesses to their prior, and the next fit is taken."""
+        both = list(STIFFNESS)
         R = fit.covariance + STIFFNESS_FLOOR**2 * np.eye(2)
+        innovation = fit.values - self.x[both]
+        if innovation @ np.linalg.solve(self.P[np.ix_(both, both)] + R, innovation) > GATE * GATE:
+            self.updates["gated"] += 1
+            self.gated_fits += 1
+            if self.gated_fits >= REOPEN_AFTER:
+                self._reopen_stiffness()
+            return
+        self.gated_fits = 0
         whiten = np.linalg.inv(np.linalg.cholesky(R))
         rows = np.zeros((2, len(self.x)))
-        rows[:, list(STIFFNESS)] = whiten
+        rows[:, both] = whiten
         for z, H in zip(whiten @ fit.values, rows):
-            self._update(float(z), float(H @ self.x), H, 1.0, "stiffness", learns=STIFFNESS)
-        self.evidence[list(STIFFNESS)] += fit.seconds
+            self._update(float(z), float(H @ self.x), H, 1.0, "stiffness", learns=STIFFNESS, gate=False)
+        self.evidence[both] += fit.seconds
+
+    def _reopen_stiffness(self) -> None:
+        log.warning("%d windows in a row disagreed with the learned cornering stiffnesses: relearning them",
+                    self.gated_fits)
+        both = list(STIFFNESS)
+        self.P[both, :] = 0.0
+        self.P[:, both] = 0.0
+        self.P[both, both] = self.prior_std[both] ** 2
+        self.evidence[both] = 0.0
+        self.gated_fits = 0
 
     def _follow(self) -> None:
         """Move each applied parameter toward its learned value, rate-limited, once ``APPLY_EVIDENCE`` s excited it.
@@ -290,6 +326,7 @@ class OnlineCalibration:
             self._learn(block)
             self.evidence += BLOCK * self.excited
             self._follow()
+            self.kinematic_offsets = self._kinematic_offsets()
             self._maybe_save(sample.t)
         return self.apply(sample)
 
@@ -307,8 +344,7 @@ class OnlineCalibration:
         values[swa] = float(identities.road_wheel_angle(values[swa], a[OFFSET], a[RATIO]))
         return replace(sample, values=values)
 
-    @property
-    def kinematic_offsets(self) -> tuple:
+    def _kinematic_offsets(self) -> tuple:
         """(ay, yaw rate) offsets the kinematic identity learned beyond the applied ones, once the lateral offset
         ``c`` has converged, else (0, 0). Applied, ``c`` waits for the steering offset (a bank, :meth:`_follow`)
         and the gyro bias for its own convergence; the estimator's kinematic checks (``ay - c = v (r - b) +

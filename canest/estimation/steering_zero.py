@@ -41,6 +41,9 @@ class FixedZero:
 
     learned = True
 
+    def use_vehicle(self, vehicle: VehicleParams) -> None:
+        """Nothing: the DBC's zero needs no vehicle."""
+
     def angle(self, inputs: TickInputs) -> float:
         return inputs.values.get("steering_wheel_angle", 0.0)
 
@@ -58,6 +61,10 @@ class SteeringZero:
         self.count = 0
         self.learned = False
         self.last_t = None
+
+    def use_vehicle(self, vehicle: VehicleParams) -> None:
+        """The steering a straight needs takes ``vehicle``'s understeer gradient (the learned stiffnesses)."""
+        self.vehicle = vehicle
 
     @property
     def std(self) -> float:

@@ -19,22 +19,26 @@ its GIL. Not :mod:`multiprocessing`: its spawned children re-import the
 caller's main script, which breaks any script that uses canest without an
 ``if __name__ == "__main__"`` guard. Its result is taken ``LATENCY`` s of drive
 time after the window closed, waiting for it then if need be: a replay learns
-the same values at the same tick on any machine, and a live daemon never waits
-(the fit is long done). Without scipy (the ``calibrate`` extra) the window is
-off and says so once.
+the same values at the same tick on any machine, and a live daemon waits only
+if a fit took longer than that (a window is checked for bends before it is
+fitted, and the worker runs single-threaded BLAS at a lower priority). A worker
+that dies turns the window off for the run, with one warning; the estimator
+goes on. Off, and saying so once, without scipy (the ``calibrate`` extra) or
+at a tick rate that is not a multiple of 50 Hz (the fit's ``STEP``).
 """
 from __future__ import annotations
 
+import importlib.util
 import logging
 import os
 import pickle
 import subprocess
 import sys
+import traceback
 from dataclasses import dataclass
 
 import numpy as np
 
-from canest.errors import DependencyError
 from canest.estimation.calibration_blocks import BlockMeans
 from canest.models import output_error
 from canest.params import VehicleParams
@@ -43,9 +47,13 @@ log = logging.getLogger("canest.calibration")
 
 WINDOW = 30.0  # s of usable driving per fit
 LATENCY = 5.0  # s of drive time between a window's end and taking its fit
+MIN_BENDS = 2.0  # s of a window with |ay| between BEND_AY and the fit's linear limit: fewer saw no yaw dynamics
+BEND_AY = 0.5  # m/s^2
 MAX_HALF_WIDTH = 0.3  # a fit whose 95 % interval of a stiffness factor is wider saw too few bends: not used
-STIFFNESS = ("front", "rear")
+STIFFNESS_NAMES = ("front", "rear")
 CLOSE_WAIT = 1.0  # s
+WORKER_ENV = {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}  # one core at most
+WORKER_NICE = 5
 
 
 @dataclass
@@ -59,46 +67,61 @@ class StiffnessFit:
 
 def fit_window(vehicle: VehicleParams, drive: output_error.Drive) -> StiffnessFit | None:
     """The output-error fit of one window (in the worker): the two stiffness factors, or None when the window
-    did not pin them down (an interval wider than ``MAX_HALF_WIDTH``, or a factor at its bound)."""
+    cannot pin them down: fewer than ``MIN_BENDS`` s of bends (not fitted: a straight's Jacobian is singular, and
+    its pseudo-inverse called the stiffnesses certain), an interval of either wider than ``MAX_HALF_WIDTH`` or not
+    above 0, or a factor at its bound."""
+    bends = (np.abs(drive.ay) >= BEND_AY) & (np.abs(drive.ay) < output_error.LINEAR_AY)
+    if bends.sum() * output_error.STEP < MIN_BENDS:
+        return None
     fit = output_error.calibrate(vehicle, [drive])
-    index = [fit.names.index(name) for name in STIFFNESS]
+    index = [fit.names.index(name) for name in STIFFNESS_NAMES]
     half = fit.half_widths[index]
-    bounds = [p for p in output_error.SHARED if p.name in STIFFNESS]
+    bounds = [p for p in output_error.SHARED if p.name in STIFFNESS_NAMES]
     values = fit.values[index]
-    if not np.all(half < MAX_HALF_WIDTH) or any(not p.low < v < p.high for p, v in zip(bounds, values)):
+    if not np.all((half > 0.0) & (half < MAX_HALF_WIDTH)) or any(not p.low < v < p.high
+                                                                  for p, v in zip(bounds, values)):
         return None
     std = half / output_error.CONFIDENCE
     covariance = fit.correlation[np.ix_(index, index)] * np.outer(std, std)
     return StiffnessFit(values, covariance, drive.seconds)
 
 
+class WorkerLost(Exception):
+    """The worker process ended or its pipe broke."""
+
+
 class FitWorker:
     """A Python subprocess running :func:`fit_window` on each pickled ``(vehicle, drive)`` it reads on stdin,
-    answering with the pickled result on stdout, in order. Its stderr is the caller's."""
+    answering with the pickled result on stdout, in order. Its stderr is the caller's; its own session, so a
+    terminal's Ctrl-C reaches only the caller (whose close ends it; a caller that dies closes its stdin)."""
 
     def __init__(self):
         path = os.pathsep.join(p for p in sys.path if p)  # the caller's canest, wherever it was imported from
         self.process = subprocess.Popen([sys.executable, "-c", f"from {__name__} import serve; serve()"],
-                                        stdin=subprocess.PIPE, stdout=subprocess.PIPE,
-                                        env={**os.environ, "PYTHONPATH": path})
+                                        stdin=subprocess.PIPE, stdout=subprocess.PIPE, start_new_session=True,
+                                        env={**os.environ, **WORKER_ENV, "PYTHONPATH": path})
 
     def submit(self, vehicle: VehicleParams, drive: output_error.Drive) -> None:
-        pickle.dump((vehicle, drive), self.process.stdin)
-        self.process.stdin.flush()
+        try:
+            pickle.dump((vehicle, drive), self.process.stdin)
+            self.process.stdin.flush()
+        except OSError as exc:
+            raise WorkerLost(f"{exc}, exit status {self.process.poll()}") from None
 
     def result(self) -> StiffnessFit | None:
-        """The oldest submission's fit (waiting for it); None, with a warning, if the worker died."""
+        """The oldest submission's fit, waiting for it."""
         try:
             return pickle.load(self.process.stdout)
-        except (EOFError, pickle.UnpicklingError) as exc:
-            log.warning("the stiffness fit's worker ended (%s, exit status %s): the window's fit is lost", exc,
-                        self.process.poll())
-            return None
+        except (EOFError, OSError, pickle.UnpicklingError) as exc:
+            raise WorkerLost(f"{exc or type(exc).__name__}, exit status {self.process.poll()}") from None
 
     def close(self) -> None:
         """End the worker: it leaves its loop when stdin closes; one still fitting (a result nobody waits for) is
         killed after ``CLOSE_WAIT``, well inside a service's stop timeout."""
-        self.process.stdin.close()
+        try:
+            self.process.stdin.close()
+        except OSError:
+            pass  # already gone
         try:
             self.process.wait(timeout=CLOSE_WAIT)
         except subprocess.TimeoutExpired:
@@ -108,13 +131,20 @@ class FitWorker:
 
 
 def serve() -> None:
-    """The worker's loop (:class:`FitWorker` starts it): until stdin closes."""
+    """The worker's loop (:class:`FitWorker` starts it): until stdin closes. A fit that raises answers None (its
+    traceback on stderr): one bad window must not end the learning."""
+    os.nice(WORKER_NICE)
     while True:
         try:
             vehicle, drive = pickle.load(sys.stdin.buffer)
         except EOFError:
             return
-        pickle.dump(fit_window(vehicle, drive), sys.stdout.buffer)
+        try:
+            fit = fit_window(vehicle, drive)
+        except Exception:  # noqa: BLE001 - reported, and the window counts as not used
+            traceback.print_exc()
+            fit = None
+        pickle.dump(fit, sys.stdout.buffer)
         sys.stdout.buffer.flush()
 
 
@@ -123,19 +153,23 @@ class StiffnessWindow:
 
     def __init__(self, vehicle: VehicleParams, names: tuple, dt: float):
         self.vehicle = vehicle
-        self.blocks = BlockMeans(names, vehicle, max(1, round(output_error.STEP / dt)))
+        ticks = output_error.STEP / dt
+        self.blocks = BlockMeans(names, vehicle, max(1, round(ticks)))
         self.rows = []
-        self.t = 0.0  # drive time of the last tick
+        self.t = None  # drive time of the last tick
         self.last_row = None
         self.due = []  # the drive time each submitted window's fit is taken, oldest first
         self.worker = None  # started with the first window
-        self.enabled = _optimizer_available()
-        self.fits = {"used": 0, "unexcited": 0}
+        self.enabled = _available(dt, ticks)
+        self.fits = {"used": 0, "unexcited": 0, "short": 0, "lost": 0}
 
     def add(self, sample) -> StiffnessFit | None:
         """Take one tick's raw sample; a fit that is due now, or None."""
         if not self.enabled:
             return None
+        if self.t is not None and sample.t < self.t:  # the clock stepped back: the window restarts, fits stay due
+            self.rows, self.last_row = [], None
+            self.due = [sample.t + LATENCY for _ in self.due]
         self.t = sample.t
         block = self.blocks.add(sample)
         if block is not None and block.wheel_speed >= output_error.MIN_SPEED:
@@ -150,17 +184,33 @@ class StiffnessWindow:
         drive = output_error.drive_of_rows("online window", self.rows)
         self.rows, self.last_row = [], None
         if drive.seconds < WINDOW / 2:
+            self.fits["short"] += 1
             return
-        if self.worker is None:
-            self.worker = FitWorker()
-        self.worker.submit(self.vehicle, drive)
+        try:
+            if self.worker is None:
+                self.worker = FitWorker()
+            self.worker.submit(self.vehicle, drive)
+        except (OSError, WorkerLost) as exc:
+            self._lose(exc)
+            return
         self.due.append(self.t + LATENCY)
 
     def _take(self) -> StiffnessFit | None:
         self.due.pop(0)
-        fit = self.worker.result()
+        try:
+            fit = self.worker.result()
+        except WorkerLost as exc:
+            self._lose(exc)
+            return None
         self.fits["used" if fit is not None else "unexcited"] += 1
         return fit
+
+    def _lose(self, exc) -> None:
+        """The worker is gone: the window is off for the rest of the run, the estimator goes on."""
+        log.warning("the cornering stiffnesses' worker is gone (%s): they are no longer learned in this run", exc)
+        self.fits["lost"] += 1 + len(self.due)
+        self.close()
+        self.enabled = False
 
     def close(self) -> None:
         """Stop the worker; fits not yet due are dropped."""
@@ -170,17 +220,21 @@ class StiffnessWindow:
         self.due = []
 
 
-def _optimizer_available() -> bool:
-    """scipy's optimizer is there; else False, warned once per process (scipy is the ``calibrate`` extra)."""
+def _available(dt: float, ticks: float) -> bool:
+    """scipy is there (the worker imports it; this process need not) and the tick period divides the fit's
+    ``STEP``; else False, warned once per process."""
     global _warned
-    try:
-        DependencyError.require("scipy.optimize", "learning the cornering stiffnesses online", output_error.INSTALL)
-    except DependencyError as exc:
-        if not _warned:
-            log.warning("%s; the other parameters are learned", exc)
-            _warned = True
-        return False
-    return True
+    if abs(ticks - round(ticks)) > 1e-6:
+        reason = (f"at {1.0 / dt:g} Hz: the fit needs a sample every {output_error.STEP:g} s, a tick rate that is a "
+                  f"multiple of {1.0 / output_error.STEP:g} Hz")
+    elif importlib.util.find_spec("scipy") is None:
+        reason = f"without the Python package 'scipy', which is not installed: {output_error.INSTALL}"
+    else:
+        return True
+    if not _warned:
+        log.warning("the cornering stiffnesses are not learned online %s; the other parameters are learned", reason)
+        _warned = True
+    return False
 
 
 _warned = False

@@ -130,8 +130,9 @@ class AxDrivenTireForceModel(TireForceModel):
     sensor_sets = tuple(s for name, s in zip(MEASUREMENT_NAMES, SENSOR_SETS) if not name.startswith("ax"))
     KEPT = np.array([MEASUREMENT_NAMES.index(name) for name in measurement_names])
 
-    def __init__(self, vehicle: VehicleParams, tire: TireModelParams = TireModelParams()):
-        super().__init__(vehicle, tire)
+    def use_vehicle(self, vehicle: VehicleParams) -> None:
+        """Take ``vehicle``'s parameters, the drive layout's too."""
+        super().use_vehicle(vehicle)
         self.layout = DriveLayout(vehicle)
 
     def longitudinal_forces(self, X: np.ndarray, u: np.ndarray) -> np.ndarray:
