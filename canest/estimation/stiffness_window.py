@@ -32,6 +32,7 @@ import importlib.util
 import logging
 import os
 import pickle
+import socket
 import subprocess
 import sys
 import traceback
@@ -93,18 +94,23 @@ class WorkerLost(Exception):
 class FitWorker:
     """A Python subprocess running :func:`fit_window` on each pickled ``(vehicle, drive)`` it reads on stdin,
     answering with the pickled result on stdout, in order. Its stderr is the caller's; its own session, so a
-    terminal's Ctrl-C reaches only the caller (whose close ends it; a caller that dies closes its stdin)."""
+    terminal's Ctrl-C reaches only the caller (whose close ends it; a caller that dies closes its stdin).
+
+    Its stdin is one end of a socket pair, not a pipe: the command line restores SIGPIPE's default (so that
+    ``canest check | head`` ends quietly), and a write into the pipe of a dead worker then killed the daemon
+    without a word; a socket is written with ``MSG_NOSIGNAL``, and a dead reader is an error to handle."""
 
     def __init__(self):
         path = os.pathsep.join(p for p in sys.path if p)  # the caller's canest, wherever it was imported from
-        self.process = subprocess.Popen([sys.executable, "-c", f"from {__name__} import serve; serve()"],
-                                        stdin=subprocess.PIPE, stdout=subprocess.PIPE, start_new_session=True,
-                                        env={**os.environ, **WORKER_ENV, "PYTHONPATH": path})
+        self.requests, worker_end = socket.socketpair()
+        with worker_end:
+            self.process = subprocess.Popen([sys.executable, "-c", f"from {__name__} import serve; serve()"],
+                                            stdin=worker_end, stdout=subprocess.PIPE, start_new_session=True,
+                                            env={**os.environ, **WORKER_ENV, "PYTHONPATH": path})
 
     def submit(self, vehicle: VehicleParams, drive: output_error.Drive) -> None:
         try:
-            pickle.dump((vehicle, drive), self.process.stdin)
-            self.process.stdin.flush()
+            self.requests.sendall(pickle.dumps((vehicle, drive)), socket.MSG_NOSIGNAL)
         except OSError as exc:
             raise WorkerLost(f"{exc}, exit status {self.process.poll()}") from None
 
@@ -118,10 +124,7 @@ class FitWorker:
     def close(self) -> None:
         """End the worker: it leaves its loop when stdin closes; one still fitting (a result nobody waits for) is
         killed after ``CLOSE_WAIT``, well inside a service's stop timeout."""
-        try:
-            self.process.stdin.close()
-        except OSError:
-            pass  # already gone
+        self.requests.close()
         try:
             self.process.wait(timeout=CLOSE_WAIT)
         except subprocess.TimeoutExpired:
