@@ -24,7 +24,8 @@ if a fit took longer than that (a window is checked for bends before it is
 fitted, and the worker runs single-threaded BLAS at a lower priority). A worker
 that dies turns the window off for the run, with one warning; the estimator
 goes on. Off, and saying so once, without scipy (the ``calibrate`` extra) or
-at a tick rate that is not a multiple of 50 Hz (the fit's ``STEP``).
+at a tick rate that is not a multiple of 50 Hz (the fit's ``STEP``); without scipy it says so at the
+first window (a short drive, as ``canest demo``'s, never needs it).
 """
 from __future__ import annotations
 
@@ -163,7 +164,7 @@ class StiffnessWindow:
         self.last_row = None
         self.due = []  # the drive time each submitted window's fit is taken, oldest first
         self.worker = None  # started with the first window
-        self.enabled = _available(dt, ticks)
+        self.enabled = _usable_rate(dt, ticks)
         self.fits = {"used": 0, "unexcited": 0, "short": 0, "lost": 0}
 
     def add(self, sample) -> StiffnessFit | None:
@@ -188,6 +189,10 @@ class StiffnessWindow:
         self.rows, self.last_row = [], None
         if drive.seconds < WINDOW / 2:
             self.fits["short"] += 1
+            return
+        if importlib.util.find_spec("scipy") is None:  # said at the first window: a short drive never needs it
+            _warn_once(f"without the Python package 'scipy', which is not installed: {output_error.INSTALL}")
+            self.enabled = False
             return
         try:
             if self.worker is None:
@@ -223,21 +228,20 @@ class StiffnessWindow:
         self.due = []
 
 
-def _available(dt: float, ticks: float) -> bool:
-    """scipy is there (the worker imports it; this process need not) and the tick period divides the fit's
-    ``STEP``; else False, warned once per process."""
-    global _warned
-    if abs(ticks - round(ticks)) > 1e-6:
-        reason = (f"at {1.0 / dt:g} Hz: the fit needs a sample every {output_error.STEP:g} s, a tick rate that is a "
-                  f"multiple of {1.0 / output_error.STEP:g} Hz")
-    elif importlib.util.find_spec("scipy") is None:
-        reason = f"without the Python package 'scipy', which is not installed: {output_error.INSTALL}"
-    else:
+def _usable_rate(dt: float, ticks: float) -> bool:
+    """The tick period divides the fit's ``STEP``; else False, warned (once per process)."""
+    if abs(ticks - round(ticks)) < 1e-6:
         return True
+    _warn_once(f"at {1.0 / dt:g} Hz: the fit needs a sample every {output_error.STEP:g} s, a tick rate that is a "
+               f"multiple of {1.0 / output_error.STEP:g} Hz")
+    return False
+
+
+def _warn_once(reason: str) -> None:
+    global _warned
     if not _warned:
         log.warning("the cornering stiffnesses are not learned online %s; the other parameters are learned", reason)
         _warned = True
-    return False
 
 
 _warned = False
