@@ -25,7 +25,7 @@ from canest.estimation.learned_parameters import NAMES, parameters
 from canest.estimation.online_calibration import APPLY_EVIDENCE, OnlineCalibration
 from canest.estimation import stiffness_window
 from canest.estimation.stiffness_window import LATENCY, WINDOW, FitWorker, StiffnessFit, fit_window
-from canest.models.output_error import Drive
+from canest.models.output_error import Drive, DriveRows
 from canest.models import identities
 from canest.models.single_track import SingleTrackModel
 from canest.models.tire_force import AxDrivenTireForceModel, TireForceModel
@@ -321,9 +321,11 @@ def test_a_fit_that_disagrees_is_left_out_whole_and_three_in_a_row_relearn_the_s
 
 
 def synthetic_rows(seconds=30.0):
-    t = np.arange(0.0, seconds, 0.02)
-    yaw = 0.08 * np.sin(0.8 * t - 0.1)
-    return [(ti, 0.5 * math.sin(0.8 * ti), r, 20.0 * r, 20.0, ti == 0.0) for ti, r in zip(t, yaw)]
+    rows = DriveRows()
+    for ti in np.arange(0.0, seconds, 0.02):
+        r = 0.08 * math.sin(0.8 * ti - 0.1)
+        rows.add(ti, 0.5 * math.sin(0.8 * ti), r, 20.0 * r, 20.0)
+    return rows
 
 
 @pytest.fixture

@@ -115,7 +115,8 @@ t = np.arange(0.0, 30.0, 0.02)
 for pipeline in (first, second):
     window = pipeline.calibration.window
     window.t = 30.0
-    window.rows = [(ti, 0.1, 0.05, 1.0, 20.0, ti == 0.0) for ti in t]
+    for ti in t:
+        window.rows.add(ti, 0.1, 0.05, 1.0, 20.0)
     window._submit()
     print(pipeline.calibration.enabled, window.enabled, window.worker is None)
 """

@@ -16,7 +16,7 @@ from canest.estimation.inputs import WHEEL_SPEEDS, TickInputs
 from canest.estimation.leveling import AccelerometerLeveling
 from canest.estimation.reference_speed import TORQUES, slip_free_speed, tick_usage
 from canest.io.logfiles import open_log
-from canest.models.output_error import MIN_SEGMENT, MIN_SPEED, STEP, Drive, drive_of_rows
+from canest.models.output_error import MIN_SEGMENT, MIN_SPEED, STEP, Drive, DriveRows
 from canest.models.wheels import WheelGeometry
 from canest.params import VehicleParams
 from canest.resample import Resampler, TickClock
@@ -51,18 +51,16 @@ def read_drive(config: Config, path, log_format=None, log_channel=None) -> Drive
     leveling = AccelerometerLeveling(config.vehicle, resampler.names)
     clock = TickClock(STEP)
     geometry = WheelGeometry(config.vehicle)
-    rows, previous_tick = [], None
+    rows = DriveRows()
     source = open_log(path, log_format, log_channel)
     frames = iter(source)
     try:
         for msg in frames:
             for tick in clock.due(msg.timestamp):
                 inputs = TickInputs(leveling.level(resampler.sample(tick)))
-                speed = wheel_speed(inputs, geometry, config.vehicle) if inputs.has(*NEEDED) else 0.0
-                if speed >= MIN_SPEED:
-                    start = previous_tick is None or tick - previous_tick > 1.5 * STEP
-                    rows.append((tick, *(inputs.values[name] for name in NEEDED[:3]), speed, start))
-                    previous_tick = tick
+                if inputs.has(*NEEDED):
+                    rows.add(tick, *(inputs.values[name] for name in NEEDED[:3]),
+                             wheel_speed(inputs, geometry, config.vehicle))
             values = decoder.decode(msg)
             for name, value in values or ():
                 resampler.hold(name, value, msg.timestamp, name in decoder.last_saturated)
@@ -71,7 +69,7 @@ def read_drive(config: Config, path, log_format=None, log_channel=None) -> Drive
         source.stop()
     for warning in source.warnings():
         LOG.warning(warning)
-    drive = drive_of_rows(path, rows)
+    drive = rows.drive(path)
     if drive.seconds < 2 * MIN_SEGMENT:
         raise LogError(f"{path}: {drive.seconds:.1f} s of usable driving (all of steering, yaw rate, ay and "
                        f"the four wheel speeds, above {MIN_SPEED:g} m/s); calibration needs at least "

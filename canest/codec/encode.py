@@ -82,7 +82,8 @@ def contract_gaps(database, broken=None) -> list:
                 STATUS_MESSAGE: list(STATUS_SIGNALS), CAUSE_MESSAGE: list(CAUSE_SIGNALS)}
     if CALIBRATION_MESSAGE in {m.name for m in database.messages}:  # optional; each page it has complete
         present = {s.name for s in database.get_message_by_name(CALIBRATION_MESSAGE).signals}
-        pages = [n for n in NAMES if n not in calibration_pages_missing(present)]
+        missing = calibration_pages_missing(present)
+        pages = [n for n in NAMES if n not in missing]
         required[CALIBRATION_MESSAGE] = [CALIBRATION_PAGE, "CalLearned", "CalConverged",
                                          *(f"{calibration_signal(n)}{std}" for n in pages for std in ("", "Std"))]
     gaps = []

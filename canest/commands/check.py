@@ -103,7 +103,7 @@ def _report(config, decoder, encoder) -> dict:
         "range_warnings": input_shortfalls(config.signals) + output_shortfalls(encoder.database),
         "raw_range_warnings": raw_range_warnings(config.signals, decoder.database),
         "calibration_sent": encoder.has_calibration and e.online_calibration,
-        "calibration_not_sent": encoder.calibration_missing if encoder.has_calibration else [],
+        "calibration_not_sent": encoder.calibration_missing,
         "ok": True,
     }
 

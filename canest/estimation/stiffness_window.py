@@ -159,9 +159,8 @@ class StiffnessWindow:
         self.vehicle = vehicle
         ticks = output_error.STEP / dt
         self.blocks = BlockMeans(names, vehicle, max(1, round(ticks)))
-        self.rows = []
+        self.rows = output_error.DriveRows()
         self.t = None  # drive time of the last tick
-        self.last_row = None
         self.due = []  # the drive time each submitted window's fit is taken, oldest first
         self.worker = None  # started with the first window
         self.enabled = _usable_rate(dt, ticks)
@@ -172,21 +171,19 @@ class StiffnessWindow:
         if not self.enabled:
             return None
         if self.t is not None and sample.t < self.t:  # the clock stepped back: the window restarts, fits stay due
-            self.rows, self.last_row = [], None
+            self.rows = output_error.DriveRows()
             self.due = [sample.t + LATENCY for _ in self.due]
         self.t = sample.t
         block = self.blocks.add(sample)
-        if block is not None and block.wheel_speed >= output_error.MIN_SPEED:
-            start = self.last_row is None or sample.t - self.last_row > 1.5 * output_error.STEP
-            self.rows.append((sample.t, block.steering_wheel_angle, block.yaw_rate, block.ay, block.wheel_speed, start))
-            self.last_row = sample.t
-            if len(self.rows) * output_error.STEP >= WINDOW:
+        if block is not None:
+            self.rows.add(sample.t, block.steering_wheel_angle, block.yaw_rate, block.ay, block.wheel_speed)
+            if self.rows.seconds >= WINDOW:
                 self._submit()
         return self._take() if self.due and self.t >= self.due[0] else None
 
     def _submit(self) -> None:
-        drive = output_error.drive_of_rows("online window", self.rows)
-        self.rows, self.last_row = [], None
+        drive = self.rows.drive("online window")
+        self.rows = output_error.DriveRows()
         if drive.seconds < WINDOW / 2:
             self.fits["short"] += 1
             return

@@ -90,14 +90,32 @@ class Drive:
         return len(self.t) * STEP
 
 
-def drive_of_rows(path, rows) -> Drive:
-    """The :class:`Drive` of rows ``(t, swa, yaw rate, ay, wheel speed, start)``, stretches shorter than
-    ``MIN_SEGMENT`` left out."""
-    table = np.array(rows, dtype=float).reshape(-1, 6)
-    starts = table[:, 5].astype(bool)
-    ids = np.cumsum(starts)
-    table = table[(np.bincount(ids)[ids] * STEP >= MIN_SEGMENT) & (ids > 0)]
-    return Drive(str(path), *table[:, :5].T, table[:, 5].astype(bool))
+class DriveRows:
+    """A :class:`Drive` collected sample by sample (every ``STEP`` s): a sample slower than ``MIN_SPEED`` is left
+    out, and the next usable one after a gap starts a new stretch."""
+
+    def __init__(self):
+        self.rows = []  # (t, swa, yaw rate, ay, wheel speed, start)
+        self.last = None  # t of the last row
+
+    def add(self, t: float, steering_wheel_angle: float, yaw_rate: float, ay: float, wheel_speed: float) -> None:
+        if wheel_speed < MIN_SPEED:
+            return
+        start = self.last is None or t - self.last > 1.5 * STEP
+        self.rows.append((t, steering_wheel_angle, yaw_rate, ay, wheel_speed, start))
+        self.last = t
+
+    @property
+    def seconds(self) -> float:
+        return len(self.rows) * STEP
+
+    def drive(self, path) -> Drive:
+        """The rows as a :class:`Drive`, stretches shorter than ``MIN_SEGMENT`` left out."""
+        table = np.array(self.rows, dtype=float).reshape(-1, 6)
+        starts = table[:, 5].astype(bool)
+        ids = np.cumsum(starts)
+        table = table[(np.bincount(ids)[ids] * STEP >= MIN_SEGMENT) & (ids > 0)]
+        return Drive(str(path), *table[:, :5].T, table[:, 5].astype(bool))
 
 
 class SingleTrackFit:
