@@ -34,6 +34,7 @@ from canest.models.wheels import WheelGeometry
 from canest.pipeline import Pipeline
 from canest.resample import Sample
 from canest.sim.mismatch import PlantMismatch, true_vehicle
+from canest.sim.sensors import DEFAULT_SENSORS
 from canest.sim.simulate import simulate
 from tests.conftest import CONFIG, ROOT
 from tests.test_config import write_variant
@@ -210,16 +211,19 @@ def test_converged_corrections_reach_the_estimator(config, learned):
 
 
 def test_the_kinematic_checks_take_out_the_learned_lateral_offset_before_it_is_applied(learned):
-    """c converges at 43 s; applied only with the steering offset (not within this drive). The gyro bias applied
+    """c converges at 54 s; applied only with the steering offset (not within this drive). The gyro bias applied
     alone left ``c / v`` in the kinematic sideslip rate, and the published sideslip std (never below the kinematic
-    mismatch) was 1.3 deg after 50 s against an error of 0.07; with the learned offsets 0.05."""
-    pipeline, _, estimates = learned
+    mismatch) was 1.3 deg after 50 s against an error of 0.07; with the learned offsets, 4 s after c's convergence,
+    0.05."""
+    pipeline, history, estimates = learned
     calibration = pipeline.calibration
     ay, gyro = NAMES.index("ay_bias"), NAMES.index("gyro_bias")
     assert calibration.converged[ay] and calibration.applied[ay] == 0.0
     assert calibration.kinematic_offsets == (calibration.x[ay], calibration.x[gyro] - calibration.applied[gyro])
     assert pipeline.estimator.judge.kinematic_offsets == calibration.kinematic_offsets
-    late = [e for e in estimates if e.t > 50.0]
+    converged_at = next(t for t, _, _, converged in history if converged[ay])
+    assert converged_at < SECONDS - 5.0
+    late = [e for e in estimates if e.t > converged_at + 4.0]  # the remembered mismatch fades (1.3 deg to 0.1 in 4 s)
     std = np.array([e.values["beta_std"] for e in late])
     assert np.degrees(np.median(std)) < 0.1 and np.degrees(std.max()) < 0.2
 
@@ -673,3 +677,29 @@ def test_accelerometers_that_roll_with_the_body_are_read_level_before_the_speed_
         learned[name] = pipeline.calibration.x[NAMES.index("speed")]
     assert learned["aware"] == pytest.approx(WRONG.wheel_radius_scale, abs=0.01)
     assert learned["unaware"] > WRONG.wheel_radius_scale + 0.04
+
+
+def test_an_imu_that_vibrates_as_a_real_cars_teaches_nothing_more_certainly_than_it_knows(config):
+    """The simulator's ``vibration 1`` (the issue's real car: ay 1.4 m/s^2 RMS in a 10 Hz band, road spikes) on a
+    flat road. Each block's ay mean then scatters 0.77 m/s^2 against the configured 0.1: learned as if quiet, the
+    speed scale came out 1.086 +- 0.007 (true 1.03), the ratio 0.66, the understeer gradient 0, the gyro bias
+    -0.33 deg/s (0.5) and the front stiffness at its bound, most of them flagged converged. Each identity's noise is
+    now the spread its innovations show, the steering identity's bend is ``v r`` (not the vibrating ay), and the
+    window fit chooses its ticks by ``v r``: every value is within 3 std of the truth, however slowly it learns."""
+    level = dataclasses.replace(WRONG, bank=0.0)
+    drive = simulate(config, "country", 80.0, 0.85, duration=SECONDS, seed=3, mismatch=level, vibration=1.0)
+    pipeline = Pipeline(config)
+    for frame in drive.frames:
+        pipeline.feed(frame)
+    calibration = pipeline.calibration
+    true = {"speed": level.wheel_radius_scale, "gyro_bias": level.gyro_bias, "ay_bias": level.ay_bias,
+            "steering_offset": level.steering_offset, "ratio": level.steering_ratio_scale,
+            "understeer": true_vehicle(config.vehicle, level).understeer_gradient,
+            "ax_bias": DEFAULT_SENSORS["ax"].bias, "front": level.stiffness_scale_front,
+            "rear": level.stiffness_scale_rear}
+    values, std = dict(zip(NAMES, calibration.values)), dict(zip(NAMES, calibration.std))
+    print({name: (round(float(values[name]), 5), round(float(std[name]), 5)) for name in NAMES})
+    assert calibration.updates["kinematic"] > 200 and calibration.updates["gated"] < 0.05 * sum(
+        calibration.updates[kind] for kind in ("kinematic", "steering", "longitudinal"))
+    for name in NAMES:
+        assert abs(values[name] - true[name]) < 3.0 * std[name], name

@@ -49,7 +49,7 @@ log = logging.getLogger("canest.calibration")
 
 WINDOW = 30.0  # s of usable driving per fit
 LATENCY = 5.0  # s of drive time between a window's end and taking its fit
-MIN_BENDS = 2.0  # s of a window with |ay| between BEND_AY and the fit's linear limit: fewer saw no yaw dynamics
+MIN_BENDS = 2.0  # s of a window turning (v r) between BEND_AY and the fit's linear limit: fewer saw no yaw dynamics
 BEND_AY = 0.5  # m/s^2
 MAX_HALF_WIDTH = 0.3  # a fit whose 95 % interval of a stiffness factor is wider saw too few bends: not used
 STIFFNESS_NAMES = ("front", "rear")
@@ -72,7 +72,8 @@ def fit_window(vehicle: VehicleParams, drive: output_error.Drive) -> StiffnessFi
     cannot pin them down: fewer than ``MIN_BENDS`` s of bends (not fitted: a straight's Jacobian is singular, and
     its pseudo-inverse called the stiffnesses certain), an interval of either wider than ``MAX_HALF_WIDTH`` or not
     above 0, or a factor at its bound."""
-    bends = (np.abs(drive.ay) >= BEND_AY) & (np.abs(drive.ay) < output_error.LINEAR_AY)
+    turning = np.abs(output_error.turning_ay(drive))
+    bends = (turning >= BEND_AY) & (turning < output_error.LINEAR_AY)
     if bends.sum() * output_error.STEP < MIN_BENDS:
         return None
     fit = output_error.calibrate(vehicle, [drive])
