@@ -5,13 +5,14 @@
     python tools/calibration.py --duration 30      # what tests/test_calibrate.py checks
     python tools/calibration.py --online           # the daemon's online calibration over one 120 s road, bank 3 deg
     python tools/calibration.py --online --bank 0 --attitude 4,2   # accelerometers rolling 4 deg/g, pitching 2
+    python tools/calibration.py --online --bank 0 --vibration 1    # an IMU vibrating as on a real car
 
 The simulated car differs from the config as issue 17 says (front stiffness x0.7, rear x1.3, steering offset
 1.5 deg, ratio +8 %, gyro bias 0.5 deg/s, ay bias 0.2 m/s^2, wheel radius +3 %); the drives are cached in
 ``--workdir``. Prints each parameter true and calibrated with the issue's bound, then the RMSE of sideslip, yaw
 rate and vx of a replay of each road with the wrong, the calibrated and the true config.
 
-``--online``: one country road (seed 3, ``--bank``) through the pipeline as the daemon runs it; each parameter's
+``--online``: one country road (``--seed``, 3 by default, ``--bank``, ``--vibration``) through the pipeline as the daemon runs it; each parameter's
 true, configured and learned value (std, * once converged) at 30, 60 and 120 s, then the RMSE after
 60 s of a replay with the online calibration, without it, and with the true parameters in the config (the
 bank, which no config holds, left out) (README "Online calibration").
@@ -91,16 +92,20 @@ def rmse(config, log: Path, truth: Path, skip: float = 0.5, on_frame=None, at_en
     return {s.state: s.rmse for s in score(table, read_table(truth), STATES, skip=skip)}
 
 
-def online(config, duration: float, bank_deg: float, workdir: Path, attitude=(0.0, 0.0)) -> None:
+def online(config, duration: float, bank_deg: float, workdir: Path, attitude=(0.0, 0.0), seed: int = 3,
+           vibration: float = 0.0) -> None:
     """The online calibration's learned values over one road, and what it does to the estimates after 60 s;
-    ``attitude``: the body's (roll, pitch) gradients in deg/g, which its accelerometers read."""
+    ``attitude``: the body's (roll, pitch) gradients in deg/g, which its accelerometers read; ``vibration``: the
+    IMU's (:mod:`canest.sim.sensors`)."""
     mismatch = dataclasses.replace(WRONG, bank=math.radians(bank_deg), roll_gradient=attitude[0],
                                    pitch_gradient=attitude[1])
-    name = f"online-s3-bank{bank_deg:g}" + ("-roll{:g}-pitch{:g}".format(*attitude) if any(attitude) else "")
+    name = (f"online-s{seed}-bank{bank_deg:g}" + ("-roll{:g}-pitch{:g}".format(*attitude) if any(attitude) else "")
+            + (f"-vib{vibration:g}" if vibration else ""))
     log, truth = drive_files(workdir, name, duration)
     if not (log.exists() and truth.exists()):
-        print(f"simulating road 3 ({duration:g} s, bank {bank_deg:+g} deg) ...", file=sys.stderr, flush=True)
-        sim = simulate(config, "country", 80.0, 0.85, duration=duration, seed=3, mismatch=mismatch)
+        print(f"simulating road {seed} ({duration:g} s, bank {bank_deg:+g} deg) ...", file=sys.stderr, flush=True)
+        sim = simulate(config, "country", 80.0, 0.85, duration=duration, seed=seed, mismatch=mismatch,
+                       vibration=vibration)
         sim.write_log(log)
         sim.write_truth(truth)
     deg = math.degrees(1.0)
@@ -134,13 +139,14 @@ def online(config, duration: float, bank_deg: float, workdir: Path, attitude=(0.
     learning = rmse(config, log, truth, skip=60.0, on_frame=snapshot, at_end=lambda p: snapshots.setdefault(
         duration, p.calibration.report()))
     fixed = rmse(without_learning(config), log, truth, skip=60.0)
-    true_config = workdir / f"true-online-bank{bank_deg:g}.yaml"
+    true_config = workdir / f"true-{name}.yaml"
     true_config.unlink(missing_ok=True)
     write_calibrated(config, true_fit(config.vehicle, mismatch, [mismatch.bank]), true_config,
                      ["the true car and sensor biases (tools/calibration.py --online)"])
     exact = rmse(without_learning(load_config(true_config)), log, truth, skip=60.0)
     start = dict(zip(NAMES, (p.start for p in parameters(config.vehicle))))
-    print(f"online calibration, road 3, bank {bank_deg:+g} deg (ay_bias is the bias less g sin(bank): one sum)")
+    print(f"online calibration, road {seed}, bank {bank_deg:+g} deg, IMU vibration {vibration:g} (ay_bias is the bias "
+          "less g sin(bank): one sum)")
     print(f"{'parameter':<16} {'unit':<6} {'true':>9} {'config':>9} " +
           " ".join(f"{f'at {m:g} s':>20}" for m in snapshots) + "   error at 60 s (bound)")
     for name, (true, factor, unit, bound) in rows.items():
@@ -192,12 +198,16 @@ def main() -> None:
     parser.add_argument("--attitude", default="0,0", metavar="ROLL,PITCH", type=gradients,
                         help="with --online: the body's roll and pitch gradients, deg/g, read by its accelerometers "
                              "(default 0,0: as if the ESC compensated them; a passenger car: 3-6 and 1-3)")
+    parser.add_argument("--seed", type=int, default=3, help="with --online: the road and noise seed (default 3)")
+    parser.add_argument("--vibration", type=float, default=0.0,
+                        help="with --online: the IMU's body vibration and road spikes, scale (default 0: white noise; "
+                             "1: as on a real car, canest.sim.sensors)")
     args = parser.parse_args()
     config = load_config(args.config)
     workdir = Path(args.workdir) / hashlib.sha1(Path(args.config).read_bytes()).hexdigest()[:8]  # drives per car
     workdir.mkdir(parents=True, exist_ok=True)
     if args.online:
-        online(config, args.duration or 120.0, args.bank, workdir, args.attitude)
+        online(config, args.duration or 120.0, args.bank, workdir, args.attitude, args.seed, args.vibration)
         return
     args.duration = args.duration or 60.0
     paths = drives(config, args.duration, workdir)
