@@ -12,10 +12,10 @@ The simulated car differs from the config as issue 17 says (front stiffness x0.7
 ``--workdir``. Prints each parameter true and calibrated with the issue's bound, then the RMSE of sideslip, yaw
 rate and vx of a replay of each road with the wrong, the calibrated and the true config.
 
-``--online``: one country road (``--seed``, 3 by default, ``--bank``, ``--vibration``) through the pipeline as the daemon runs it; each parameter's
-true, configured and learned value (std, * once converged) at 30, 60 and 120 s, then the RMSE after
-60 s of a replay with the online calibration, without it, and with the true parameters in the config (the
-bank, which no config holds, left out) (README "Online calibration").
+``--online``: one country road (``--seed``, 3 by default, ``--bank``, ``--vibration``) through the pipeline as
+the daemon runs it; each parameter's true, configured and learned value (std, * once converged) at 30, 60 and
+120 s, then the RMSE after 60 s of a replay with the online calibration, without it, and with the true
+parameters in the config (the bank, which no config holds, left out) (README "Online calibration").
 """
 from __future__ import annotations
 
@@ -203,6 +203,10 @@ def main() -> None:
                         help="with --online: the IMU's body vibration and road spikes, scale (default 0: white noise; "
                              "1: as on a real car, canest.sim.sensors)")
     args = parser.parse_args()
+    if not args.online and (args.seed != 3 or args.vibration or args.bank != 3.0 or any(args.attitude)):
+        parser.error("--seed, --vibration, --bank and --attitude choose the road of --online")
+    if args.vibration < 0.0:
+        parser.error(f"--vibration is a scale of at least 0, got {args.vibration}")
     config = load_config(args.config)
     workdir = Path(args.workdir) / hashlib.sha1(Path(args.config).read_bytes()).hexdigest()[:8]  # drives per car
     workdir.mkdir(parents=True, exist_ok=True)

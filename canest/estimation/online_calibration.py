@@ -16,11 +16,11 @@ only when the drive excites it and the car is steady enough for it to hold:
   observes the speed scale ``speed`` (the effective wheel radius over the configured one), the gyro bias
   ``gyro_bias`` and the lateral offset ``ay_bias`` (the accelerometer's bias plus the mean bank's
   ``-g sin(bank)``: no sensor here tells them apart);
-- ``steering`` (above ``MIN_STEER_SPEED``, |ay| below ``LINEAR_AY``, steady steering and yaw rate):
+- ``steering`` (above ``MIN_STEER_SPEED``, |v r| below ``LINEAR_AY``, steady steering and yaw rate):
   ``delta_sw = offset + R (k L r / v + u v r)`` observes ``steering_offset`` and, in bends, ``ratio`` (``k``,
   a factor on the configured ratio ``R``) and ``u = k K_us``, reported as ``understeer`` (``K_us``, the
   stiffnesses' balance): linear in what it learns, so no linearization point can mislead it;
-- ``longitudinal`` (moving, |ay| small): ``ax_m = s dv_w/dt + b_ax`` observes ``ax_bias`` (bias plus the
+- ``longitudinal`` (moving, |v r| small): ``ax_m = s dv_w/dt + b_ax`` observes ``ax_bias`` (bias plus the
   mean grade's ``g sin(grade)``); it *considers* the speed scale (Schmidt, :meth:`_update`) but does not learn
   it: a car pitches as it accelerates (nose up, about 2 deg per g), so its accelerometer reads ``ax`` a few
   percent high, and a speed scale learned from it holds that. On the real Ford log (an ACC speed-up from 30
@@ -87,7 +87,7 @@ REOPEN_AFTER = 3  # window fits gated in a row before the stiffnesses are relear
 STIFFNESS_FLOOR = 0.03  # std of a window fit's stiffness factor beyond its interval: the linear tire's model error
 NOISE = {"kinematic": 0.1, "steering": math.radians(0.5), "longitudinal": 0.1,  # per block, widened for the
          "standstill": math.radians(0.05)}  # errors' correlation in time and the identities' model error
-SPREAD_UPDATES = 100  # an identity's innovations averaged into its measured spread (:meth:`_noise`)
+SPREAD_UPDATES = 20  # an identity's innovations averaged into its measured noise (:class:`InnovationSpread`)
 SPREAD_WARMUP = 10  # innovations of an identity seen before it learns: its spread must be known first
 MAX_CORRELATION = 0.95  # of an identity's consecutive innovations, as measured (:meth:`_noise`)
 SECONDS_PER_HOUR = 3600.0
@@ -161,11 +161,16 @@ class OnlineCalibration:
         model error cannot leak into them. The Joseph form keeps P symmetric positive semi-definite for any gain,
         the zeroed rows included."""
         PH = self.P @ H
-        innovation = z - h
-        R = self._noise(kind, noise, innovation, float(H @ PH))
+        predicted, innovation = float(H @ PH), z - h
+        if not math.isfinite(innovation):
+            return
+        R = self._noise(kind, noise)
+        spread = self.spread.get(kind)
+        if spread is not None:  # measured after R was taken: an innovation never widens its own gate
+            spread.add(innovation, predicted, GATE * math.sqrt(predicted + (R or noise * noise)))
         if R is None:
             return
-        S = float(H @ PH) + R
+        S = predicted + R
         if gate and innovation * innovation > GATE * GATE * S:
             self.updates["gated"] += 1
             return
@@ -177,16 +182,16 @@ class OnlineCalibration:
         self.x = np.clip(self.x + K * innovation, self.low, self.high)
         A = np.eye(len(self.x)) - np.outer(K, H)
         self.P = A @ self.P @ A.T + np.outer(K, K) * R
-        self.excited |= (np.abs(H) * self.prior_std > 0.3 * noise) & (K != 0.0)
+        self.excited |= (np.abs(H) * self.prior_std > 0.3 * math.sqrt(R)) & (K != 0.0)
         self.updates[kind] += 1
 
-    def _noise(self, kind: str, noise: float, innovation: float, predicted: float) -> float | None:
-        """The variance of one ``kind`` update's noise: the configured ``noise``, or what its innovations show when
-        larger (:class:`InnovationSpread`: their spread less what the parameters' uncertainty ``predicted``
-        explains, widened by their correlation; a whitened stiffness fit keeps its own). None for the first
+    def _noise(self, kind: str, noise: float) -> float | None:
+        """The variance of one ``kind`` update's noise: the configured ``noise``, or what its earlier innovations
+        show when larger (:class:`InnovationSpread`: their mean square less what the parameters' uncertainty
+        explained, widened by their correlation; a whitened stiffness fit keeps its own). None for the first
         ``SPREAD_WARMUP`` innovations of an identity, which only measure it: a spread that started at the
         configured noise and grew over the first updates let them, trusted as if quiet, learn the ax offset 0.16
-        m/s^2 off at 30 s with a std of 0.03.
+        m/s^2 off at 30 s with a std of 0.03. Evidence counts a block against this noise, not the configured one.
 
         The configured noise is a real ESC's (the Ford log's kinematic innovations: 0.08 m/s^2 per block, 0.1
         widened for their correlation); an IMU whose ay vibrates as the issue's real car's (the simulator's
@@ -200,10 +205,8 @@ class OnlineCalibration:
         +31 to +47 %, within 2.8 std."""
         if kind not in self.spread:
             return noise * noise
-        measured = self.spread[kind].add(innovation, predicted)
-        if measured is None:
-            return None
-        return max(noise * noise, measured)
+        measured = self.spread[kind].noise()
+        return None if measured is None else max(noise * noise, measured)
 
     def _learn(self, block: Block) -> None:
         self.P = self.P + self.Q
@@ -219,7 +222,8 @@ class OnlineCalibration:
         if block.wheel_speed < MIN_SPEED:
             return
         speed_rate = (block.wheel_speed - first.wheel_speed) / span
-        if block.ax is not None and abs(block.ay) < 1.0 and abs(block.ax) < MAX_AX:
+        turning = self.x[SPEED] * block.wheel_speed * (block.yaw_rate - self.x[GYRO])  # v r: ay without its vibration
+        if block.ax is not None and abs(turning) < 1.0 and abs(block.ax) < MAX_AX:
             mean_ax = sum(b.ax for b in list(self.history)[1:]) / HISTORY
             H = np.zeros(len(self.x))
             H[SPEED], H[AX] = speed_rate, 1.0
@@ -234,7 +238,7 @@ class OnlineCalibration:
         H[SPEED], H[GYRO], H[AY] = block.wheel_speed * (block.yaw_rate - bias), -s * block.wheel_speed, 1.0
         h = identities.measured_ay(block.wheel_speed, block.yaw_rate, s, bias, self.x[AY])
         self._update(block.ay, h, H, NOISE["kinematic"], "kinematic")
-        if block.wheel_speed >= MIN_STEER_SPEED and abs(block.ay) < LINEAR_AY:
+        if block.wheel_speed >= MIN_STEER_SPEED and abs(turning) < LINEAR_AY:
             self._steering_update(block)
 
     def _steering_update(self, block: Block) -> None:
@@ -433,6 +437,7 @@ class OnlineCalibration:
                 self.x[i], self.evidence[i], self.applied[i] = entry["value"], entry["evidence"], entry["applied"]
         variances = np.array([saved[name]["variance"] if name in saved else spec.std**2
                               for name, spec in zip(NAMES, self.specs)])
+        self.spread = {kind: InnovationSpread() for kind in NOISE}  # the noise is this drive's, measured anew
         k, understeer = self.x[RATIO], self.x[UNDERSTEER]
         self.x[UNDERSTEER] = k * understeer  # the state's u = k K_us, its variance as if k and K_us were independent:
         variances[UNDERSTEER] = k * k * variances[UNDERSTEER] + understeer**2 * variances[RATIO]  # K_us's std grows
@@ -465,37 +470,46 @@ def make_calibration(config: Config, names: tuple) -> OnlineCalibration:
 
 
 class InnovationSpread:
-    """One identity's innovations: their variance beyond what the parameters' uncertainty explains, times the
+    """One identity's innovations: their mean square beyond what the parameters' uncertainty explained, times the
     information lost to their correlation in time, the AR(1) factor ``(1 + rho) / (1 - rho)`` of consecutive
-    innovations (as :mod:`canest.models.output_error` widens its intervals), each about their mean: the
+    innovations (as :mod:`canest.models.output_error` widens its intervals) taken about their mean: the
     parameters' error at the start is an innovation that stays (on the banked road ``c`` of -0.31 made
-    consecutive innovations correlate 0.97 and held the speed scale at the configured 1.0 for 50 s), not
-    noise that repeats. Means over all innovations until
-    ``SPREAD_UPDATES`` were seen, then moving ones; gated innovations count too. The longitudinal identity's ax,
-    a mean over ``HISTORY`` blocks that ``HISTORY`` updates in a row share, shows its correlation here as well."""
+    consecutive innovations correlate 0.97 and held the speed scale at the configured 1.0 for 50 s), not noise
+    that repeats. Means over all innovations until ``SPREAD_UPDATES`` were seen, then moving ones: a
+    longer memory kept the start's large innovations (the parameters still at their prior) for 20 s and slowed
+    every identity on the banked road. Gated innovations count too (a noisier IMU must widen the gate),
+    clipped at the gate (a pothole must not). The longitudinal identity's ax, a mean over ``HISTORY`` blocks
+    that ``HISTORY`` updates in a row share, shows its correlation here as well (AR(1) reads its lag-1
+    correlation 0.75 as a factor of 7 where the shared blocks make 4: it learns the ax offset slower than it
+    could)."""
 
     def __init__(self):
         self.seen = 0
+        self.pairs = 0  # of consecutive innovations
         self.excess = 0.0  # mean of innovation^2 - predicted variance
         self.mean = 0.0  # of the innovations
         self.square = 0.0  # mean of innovation^2
         self.lagged = 0.0  # mean of the products of consecutive innovations
         self.last = None
 
-    def add(self, innovation: float, predicted: float) -> float | None:
-        """The measured noise variance after ``innovation`` (predicted variance ``predicted``), None while fewer
-        than ``SPREAD_WARMUP`` + 1 were seen."""
+    def add(self, innovation: float, predicted: float, limit: float) -> None:
+        """One innovation (clipped to +-``limit``) whose variance the parameters' uncertainty predicted."""
+        innovation = min(max(innovation, -limit), limit)
         self.seen = min(self.seen + 1, SPREAD_UPDATES)
         weight = 1.0 / self.seen
         self.excess += weight * (innovation * innovation - predicted - self.excess)
         self.mean += weight * (innovation - self.mean)
         self.square += weight * (innovation * innovation - self.square)
         if self.last is not None:
-            self.lagged += weight * (innovation * self.last - self.lagged)
+            self.pairs = min(self.pairs + 1, SPREAD_UPDATES)
+            self.lagged += (innovation * self.last - self.lagged) / self.pairs
         self.last = innovation
-        if self.seen <= SPREAD_WARMUP:
+
+    def noise(self) -> float | None:
+        """The measured noise variance, None before ``SPREAD_WARMUP`` innovations were seen."""
+        if self.seen < SPREAD_WARMUP:
             return None
         variance = self.square - self.mean * self.mean
-        rho = (self.lagged - self.mean * self.mean) / variance if variance > 0.0 else 0.0
+        rho = (self.lagged - self.mean * self.mean) / variance if variance > 0.0 and self.pairs else 0.0
         rho = min(max(rho, 0.0), MAX_CORRELATION)
         return self.excess * (1.0 + rho) / (1.0 - rho)
