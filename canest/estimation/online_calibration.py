@@ -198,11 +198,11 @@ class OnlineCalibration:
         ``vibration 1``: 1.4 m/s^2 in a 10 Hz band, 0.77 m/s^2 in a block's mean) gave innovations eight times
         the configured noise, half the updates were gated as outliers, and the rest, trusted as if quiet,
         learned the speed scale 1.085 (true 1.03), the ratio 0.63 (1.08) and the front stiffness at its bound.
-        On a quiet IMU and a flat road the measured noise stays below the configured one: nothing changes.
-        On a banked road the steering identity's errors are the tires' curve under the bank's side force, slow
-        (consecutive innovations correlated 0.7): counted as independent, they made the ratio 12-17 % and the
-        understeer gradient 42-47 % wrong at 60 s, two to five std off (seeds 5, 7); widened, -10 to -14 % and
-        +31 to +47 %, within 2.8 std."""
+        On a quiet IMU and a flat road the measured noise stays below the configured one. On a banked road the
+        steering identity's errors are the tires' curve under the bank's side force, slow (consecutive
+        innovations correlated 0.7): counted as independent, they made the ratio 12-17 % and the understeer
+        gradient 42-47 % wrong at 60 s, two to five std off (seeds 5, 7); measured and widened, -6 to -9 % and
+        +28 to +35 %, seed 7 still four std off (README "Online calibration")."""
         if kind not in self.spread:
             return noise * noise
         measured = self.spread[kind].noise()
