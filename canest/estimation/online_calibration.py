@@ -486,9 +486,9 @@ class InnovationSpread:
     def __init__(self):
         self.seen = 0
         self.pairs = 0  # of consecutive innovations
-        self.excess = 0.0  # mean of innovation^2 - predicted variance
         self.mean = 0.0  # of the innovations
         self.square = 0.0  # mean of innovation^2
+        self.predicted = 0.0  # mean of their predicted variances
         self.lagged = 0.0  # mean of the products of consecutive innovations
         self.last = None
 
@@ -497,9 +497,9 @@ class InnovationSpread:
         innovation = min(max(innovation, -limit), limit)
         self.seen = min(self.seen + 1, SPREAD_UPDATES)
         weight = 1.0 / self.seen
-        self.excess += weight * (innovation * innovation - predicted - self.excess)
         self.mean += weight * (innovation - self.mean)
         self.square += weight * (innovation * innovation - self.square)
+        self.predicted += weight * (predicted - self.predicted)
         if self.last is not None:
             self.pairs = min(self.pairs + 1, SPREAD_UPDATES)
             self.lagged += (innovation * self.last - self.lagged) / self.pairs
@@ -512,4 +512,4 @@ class InnovationSpread:
         variance = self.square - self.mean * self.mean
         rho = (self.lagged - self.mean * self.mean) / variance if variance > 0.0 and self.pairs else 0.0
         rho = min(max(rho, 0.0), MAX_CORRELATION)
-        return self.excess * (1.0 + rho) / (1.0 - rho)
+        return (self.square - self.predicted) * (1.0 + rho) / (1.0 - rho)
