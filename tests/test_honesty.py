@@ -107,10 +107,13 @@ def test_the_lateral_forces_std_is_the_tire_curves_error_not_a_random_walks(tmp_
     """The tire-force model's forces relax towards the tire curve; their std was that of a 3000 N/sqrt(s) random
     walk against the relaxation (336 N on every wheel, NEES 0.08-0.61, mean 0.28, on this drive of a car drawn
     with its stiffnesses off). It is now the stiffness uncertainty's share of each force, moving an axle's two
-    wheels together, over a 300 N/sqrt(s) floor."""
+    wheels together, over a 300 N/sqrt(s) floor. The sideslip's covariance holds that error too, and the
+    stiffness term of the other models added on top of it doubled it (NEES 0.35 on this drive, 1.17 once)."""
     case = honesty.Case("sine", 80.0, 0.85, 2, car="drawn")
     result = honesty.run_case(CONFIG, ["dici-gfckf"], case, tmp_path)
     scores = [honesty.summarize(f"fy_{wheel}", result["sums"]["dici-gfckf"][f"fy_{wheel}"])
               for wheel in ("fl", "fr", "rl", "rr")]
     assert all(score.valid > 0.3 and score.vbw == 0.0 for score in scores), scores
     assert 0.4 <= sum(score.nees for score in scores) / len(scores) <= 2.0, scores
+    sideslip = honesty.summarize("beta", result["sums"]["dici-gfckf"]["beta"])
+    assert sideslip.valid > 0.3 and sideslip.vbw == 0.0 and 0.5 <= sideslip.nees <= 2.0, sideslip

@@ -43,6 +43,7 @@ def accelerations(inputs: TickInputs) -> tuple[float, float]:
 
 class TireForceEstimator(Estimator):
     extra_states = LATERAL_FORCES
+    covariance_has_tire_error = True  # :meth:`_process_noise`
 
     def __init__(self, config):
         self.torques = all(name in config.signals for name in TORQUES)
