@@ -1,8 +1,16 @@
 """The reference speed: the wheels while they roll freely, the integrated acceleration while they slip."""
+from dataclasses import replace
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
 
-from canest.estimation.reference_speed import DRIFT, MAX_GAP, ReferenceSpeed
+from canest.config import load_config
+from canest.estimation.inputs import TickInputs
+from canest.estimation.reference_speed import DRIFT, MAX_GAP, PAIR_SETTLE, ReferenceSpeed, tick_usage
+from canest.models.wheel_force import DriveLayout
+from canest.models.wheels import WheelGeometry
+from tests.conftest import CONFIG
 
 RADIUS, STIFFNESS, ANCHORED_STD = 0.3, 15.0, 0.05
 ROLLING = np.zeros(4)
@@ -31,12 +39,121 @@ def test_spinning_wheels_are_not_followed_and_the_uncertainty_grows():
     assert std == pytest.approx(np.hypot(ANCHORED_STD, DRIFT * 1.0))
 
 
-def test_a_wheel_out_of_step_with_the_imu_stops_the_anchoring_even_without_torque():
+def rolled(seconds=PAIR_SETTLE, drive_front_share=1.0):
+    """A reference after ``seconds`` of 10 ms ticks of free rolling at 50 rad/s: its pairs have settled."""
+    ref = ReferenceSpeed(RADIUS, STIFFNESS, ANCHORED_STD, drive_front_share)
+    for k in range(int(round(seconds / 0.01)) + 1):
+        ref.update(k * 0.01, 0.0, np.full(4, 50.0), ROLLING, ROLLING)
+    return ref, ref.last_t
+
+
+def test_a_wheel_out_of_step_with_the_imu_stops_the_anchoring_on_its_axle_even_without_torque():
+    ref, t = rolled()
+    locking = np.array([-20.0, 0.0, 0.0, 0.0])  # rad/s^2: one front wheel decelerating on its own
+    speed, std = ref.update(t + 0.01, 0.0, np.array([49.0, 50.0, 50.2, 50.2]), locking, ROLLING)
+    assert speed == pytest.approx(RADIUS * 50.2)  # the rear pair's speed, not the mean with the locking wheel
+    assert std == pytest.approx(np.sqrt(2.0) * ANCHORED_STD)  # two wheels' noise, not four
+    locking = np.array([-20.0, 0.0, 0.0, -20.0])  # a wheel of each axle: no pair rolls freely, ax is integrated
+    speed, std = ref.update(t + 0.02, 0.0, np.array([48.0, 50.0, 50.2, 49.0]), locking, ROLLING)
+    assert speed == pytest.approx(RADIUS * 50.2) and std > np.sqrt(2.0) * ANCHORED_STD
+
+
+def test_no_pair_measures_the_speed_before_it_has_been_seen_undriven_for_the_settling_time():
+    """After a start or a gap nothing is known of what the pairs transmitted: one locking wheel then stops the
+    anchoring, as it did before pairs were used."""
     ref = reference()
     ref.update(0.0, 0.0, np.full(4, 50.0), ROLLING, ROLLING)
-    locking = np.array([-20.0, 0.0, 0.0, 0.0])  # rad/s^2: one wheel decelerating on its own
-    speed, std = ref.update(0.01, 0.0, np.array([49.8, 50.0, 50.0, 50.0]), locking, ROLLING)
-    assert speed == pytest.approx(RADIUS * 50.0) and std > ANCHORED_STD
+    ref.update(0.01, 0.0, np.array([49.0, 50.0, 50.2, 50.2]), np.array([-20.0, 0.0, 0.0, 0.0]), ROLLING)
+    assert ref.anchored_at == 0.0
+
+
+def test_braking_leaves_no_pair_undriven_whatever_the_torques_say():
+    """Motor torques do not show the friction brakes, which act on both axles: braking at 8 m/s^2 with a rear wheel
+    locking and the others 4 % slow, the front pair (torque 0) anchored the speed 0.75 m/s low, std 0.07."""
+    ref, t = rolled()
+    wheels = np.array([48.0, 48.0, 20.0, 48.0])
+    locking = np.array([-8.0 / RADIUS, -8.0 / RADIUS, -200.0, -8.0 / RADIUS])
+    speed, std = ref.update(t + 0.01, -8.0, wheels, locking, ROLLING)
+    assert speed == pytest.approx(RADIUS * 50.0 - 0.08) and std > ANCHORED_STD
+
+
+@pytest.mark.parametrize("drive_front_share", [1.0, 0.0, 0.5])
+def test_only_an_undriven_axles_pair_measures_the_speed_alone(drive_front_share):
+    """At a steady speed ax shows no drive force, but drag and rolling resistance need some from the driven pair:
+    with a wheel of the other pair out of step, a front-driven car's rear pair gives the speed, a rear-driven car's
+    rear pair (driven, 0.6 % ahead) does not, nor either pair of a car driven at all four."""
+    ref, t = rolled(drive_front_share=drive_front_share)
+    ahead = np.array([50.3, 50.3, 50.0, 50.0]) if drive_front_share else np.array([50.0, 50.0, 50.3, 50.3])
+    front_out_of_step = np.array([0.0, -20.0, 0.0, 0.0])
+    speed, _ = ref.update(t + 0.01, 0.0, ahead, front_out_of_step, ROLLING)
+    if drive_front_share == 1.0:
+        assert ref.anchored_at == t + 0.01 and speed == pytest.approx(RADIUS * 50.0)
+    else:
+        assert ref.anchored_at == t and speed == pytest.approx(RADIUS * 50.0)  # integrated
+
+
+def test_a_pair_brought_to_the_four_wheels_mean_by_the_steered_front_wheels():
+    """The measurement is the four wheel centres' mean speed; a rear pair rolls at vx, a steered front pair at
+    ``vx + front_excess``, so the four wheels' mean is the rear pair's plus half the excess (a front-driven car),
+    and the front pair's less half of it (a rear-driven one). A driven pair is no reference alone, even below the
+    free-rolling usage."""
+    excess = -0.04  # m/s
+    for drive_front_share, usage, expected in ((1.0, [0.3, 0.3, 0.0, 0.0], RADIUS * 50.0 + excess / 2),
+                                                (0.0, [0.0, 0.0, 0.3, 0.3], RADIUS * 50.0 - excess / 2)):
+        ref, t = rolled(drive_front_share=drive_front_share)
+        speed, _ = ref.update(t + 0.01, 0.0, np.full(4, 50.0), ROLLING, np.array(usage), excess)
+        assert ref.anchored_at == t + 0.01 and speed == pytest.approx(expected)
+        ref.update(t + 0.02, 0.0, np.full(4, 50.0), ROLLING, np.array(usage)[::-1], excess)
+        assert ref.anchored_at == t + 0.01
+
+
+def test_a_pair_its_motors_just_released_does_not_anchor_the_speed():
+    """A launch on four motors ends: the torques are cut while the wheels still spin 3.5 m/s ahead, and a pair
+    whose deceleration matches ax for a sample is no measurement of the car's speed until it has settled."""
+    ref = reference()
+    ref.update(0.0, 0.0, np.full(4, 50.0), ROLLING, ROLLING)
+    ref.update(0.01, 3.0, np.full(4, 50.0), np.full(4, 3.0 / RADIUS), np.full(4, 0.3))  # launching
+    spinning = np.full(4, 50.0 + 3.5 / RADIUS)
+    out_of_step = np.array([-30.0, -30.0, 0.0, 0.0])  # torques cut: the front pair settling, the rear in step
+    for k in range(2, 51):  # 10 ms ticks until the rear pair has been released for PAIR_SETTLE
+        speed, _ = ref.update(k * 0.01, 0.0, spinning, out_of_step, ROLLING)
+    assert speed == pytest.approx(RADIUS * 50.0 + 0.03) and ref.anchored_at == 0.0
+    speed, std = ref.update(0.01 + PAIR_SETTLE, 0.0, spinning, out_of_step, ROLLING)
+    assert speed == pytest.approx(RADIUS * spinning[2]) and std == pytest.approx(np.sqrt(2.0) * ANCHORED_STD)
+
+
+@pytest.mark.parametrize("drive, followed", [("front", "rear"), ("rear", "front"), ("all", None)])
+def test_a_car_without_torques_accelerating_is_not_measured_by_its_driven_wheels(drive, followed):
+    """No motor torques on the bus (most cars): the share of ``m ax`` the drive layout gives each wheel says which
+    ones slip. A front-driven car speeding up at 3 m/s^2 with its front wheels 2 % ahead: the reference is the rear
+    pair's speed (it was the front wheels' in the mean, 1 % high, flagged valid); driven at all four, ax is
+    integrated."""
+    config = load_config(CONFIG)
+    vehicle = replace(config.vehicle, drive_front_share={"front": 1.0, "rear": 0.0, "all": 0.5}[drive])
+    geometry, layout = WheelGeometry(vehicle), DriveLayout(vehicle)
+    ax, v, dt = 3.0, 20.0, 0.01
+    slip = {"front": np.array([1.02, 1.02, 1.0, 1.0]), "rear": np.array([1.0, 1.0, 1.02, 1.02]),
+            "all": np.full(4, 1.02)}[drive]
+    ref = ReferenceSpeed(vehicle.wheel_radius, vehicle.tire.longitudinal_stiffness, ANCHORED_STD,
+                         vehicle.drive_front_share)
+    ref.update(0.0, 0.0, np.full(4, v / vehicle.wheel_radius), ROLLING, ROLLING)
+    for k in range(1, 101):
+        v += ax * dt
+        inputs = tick_inputs(k * dt, {"ax": ax, "ay": 0.0})
+        usage = tick_usage(inputs, geometry, vehicle.wheel_radius, layout)
+        wheels = slip * v / vehicle.wheel_radius
+        speed, std = ref.update(k * dt, ax, wheels, np.full(4, ax / vehicle.wheel_radius), usage)
+    assert speed == pytest.approx(v, abs=0.01)
+    if followed is None:
+        assert max(usage) > 0.1 and ref.anchored_at == 0.0 and std == pytest.approx(np.hypot(ANCHORED_STD, DRIFT))
+    else:
+        assert ref.anchored_at == pytest.approx(1.0) and std == pytest.approx(np.sqrt(2.0) * ANCHORED_STD)
+
+
+def tick_inputs(t, values):
+    n = len(values)
+    return TickInputs(SimpleNamespace(t=t, names=list(values), values=list(values.values()), stale=[False] * n,
+                                      fresh=[True] * n, ages=[0.0] * n, saturated=[False] * n))
 
 
 def test_a_gap_in_the_inputs_takes_the_wheels_again():

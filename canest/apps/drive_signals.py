@@ -35,7 +35,9 @@ def check_signals(config: Config) -> None:
 
 def wheel_speed(inputs: TickInputs, geometry: WheelGeometry, vehicle: VehicleParams) -> float:
     """The four wheels' mean speed, without the slip their motors' torques need where all four are in (as the
-    estimator's reference speed takes it: the radius is then fitted to the same speed the estimator uses)."""
+    estimator's reference speed takes it: the radius is then fitted to the same speed the estimator uses); else the
+    plain mean (the estimator's reference takes out the slip the drive layout gives ax, which in steady driving,
+    where the fit's ticks are, is none)."""
     if not inputs.has(*TORQUES):
         return inputs.wheel_speed(vehicle.wheel_radius)
     return slip_free_speed([inputs.values[name] for name in WHEEL_SPEEDS],

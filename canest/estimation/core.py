@@ -52,7 +52,7 @@ from canest.estimation.reference_speed import ReferenceSpeed, tick_usage
 from canest.estimation.steering_zero import steering_zero
 from canest.filters import Transition, make_filter
 from canest.filters.base import central_difference_jacobian
-from canest.models.wheel_force import WheelAcceleration
+from canest.models.wheel_force import DriveLayout, WheelAcceleration
 from canest.models.wheels import WheelGeometry
 from canest.settings import Config
 
@@ -81,7 +81,7 @@ class Estimator:
     """The model-independent tick logic; a binding subclass names the model and fills the hooks."""
 
     extra_states: tuple = ()  # published beyond OUTPUT_STATES, each with its _std
-    covariance_has_tire_error = False  # the process noise carries the tire curve's error (:meth:`_publish`)
+    covariance_has_tire_error = False  # its Q carries the tire curve's error above min_speed (:meth:`_publish`)
 
     def __init__(self, config: Config, model):
         self.config = config
@@ -112,8 +112,9 @@ class Estimator:
         self.judge = StateJudge(model, config.vehicle, self.dt)
         self.stale_before = self.stale_now = frozenset()  # inputs stale on the previous and on this tick
         self.geometry = WheelGeometry(config.vehicle)
+        self.layout = DriveLayout(config.vehicle)  # which wheels ax drives or brakes, for a car without torques
         self.reference_speed = ReferenceSpeed(self.vehicle.wheel_radius, self.vehicle.tire.longitudinal_stiffness,
-                                              self.est.measurement_noise["vx_reference"])
+                                              self.est.measurement_noise["vx_reference"], self.vehicle.drive_front_share)
         self.reference_wheel_acceleration = WheelAcceleration()
         self.gyro_holds = {row: (name, GyroHold()) for row, name in enumerate(model.measurement_names)
                            if name in GYROS}
@@ -193,15 +194,19 @@ class Estimator:
 
     def _reference_speed(self, inputs: TickInputs, t: float):
         """(speed, std) of the slip-aware reference speed (:mod:`canest.estimation.reference_speed`), or None
-        without wheel speeds and ax. Motor torques, where mapped, tell which wheels transmit force."""
+        without wheel speeds and ax. Motor torques, where mapped, tell which wheels transmit force, else ax and
+        the drive layout."""
         if not inputs.has(*WHEEL_SPEEDS, "ax"):
             return None
         speeds = [inputs.values[name] for name in WHEEL_SPEEDS]
-        usage = tick_usage(inputs, self.geometry, self.vehicle.wheel_radius)
-        beta, vx = self.filter.x[self.beta], self.filter.x[self.vx]
+        usage = tick_usage(inputs, self.geometry, self.vehicle.wheel_radius, self.layout)
+        beta, vx, yaw_rate = self.filter.x[self.beta], self.filter.x[self.vx], inputs.current("yaw_rate")
+        vy = vx * math.tan(beta)
         accelerations = self.reference_wheel_acceleration.update(t, speeds).tolist()
-        acceleration = inputs.current("ax") + inputs.current("yaw_rate") * vx * math.tan(beta)
-        return self.reference_speed.update(t, acceleration, speeds, accelerations, usage)
+        acceleration = inputs.current("ax") + yaw_rate * vy
+        delta = self._road_wheel_angle(inputs)
+        front_excess = vx * (math.cos(delta) - 1.0) + (vy + self.vehicle.cg_to_front * yaw_rate) * math.sin(delta)
+        return self.reference_speed.update(t, acceleration, speeds, accelerations, usage, front_excess)
 
     def _derived(self, inputs: TickInputs, t: float, lateral_ok: bool) -> dict:
         """Channels computed from the inputs this tick: name -> (value, standard deviation, age).
@@ -313,7 +318,8 @@ class Estimator:
         beta_model_std = self.judge.sideslip_model_std(inputs.current("ay"), rear_slip)
         drift = self.judge.drift(inputs, vx, beta, math.hypot(std[self.beta], beta_model_std),
                                  reference.last_t != t or reference.anchored_at == t)
-        std = self.judge.widen(std, index, ratios, 0.0 if self.covariance_has_tire_error else beta_model_std, drift)
+        carried = self.covariance_has_tire_error and not self.low_speed  # the model's Q has the tire error
+        std = self.judge.widen(std, index, ratios, 0.0 if carried else beta_model_std, drift)
         values = {
             "vx": vx, "vy": vx * math.tan(beta), "beta": beta, "yaw_rate": x[self.yaw],
             "vx_std": std[self.vx], "vy_std": math.hypot(vx * std[self.beta] / math.cos(beta) ** 2,
