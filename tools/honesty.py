@@ -31,12 +31,11 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from canest.apps.compare import with_filter  # noqa: E402
+from canest.apps.compare import parse_filters, runnable, with_filter  # noqa: E402
 from canest.apps.evaluate import DISPLAY, counts, pool, read_table, summarize  # noqa: E402
 from canest.apps.replay import replay  # noqa: E402
 from canest.config import DEFAULT_CONFIG, load_config  # noqa: E402
-from canest.filters import FILTERS  # noqa: E402
-from canest.errors import SimulationError  # noqa: E402
+from canest.errors import CanestError, SimulationError  # noqa: E402
 from canest.sim.mismatch import PlantMismatch, drawn_mismatch  # noqa: E402
 from canest.sim.simulate import simulate  # noqa: E402
 
@@ -152,7 +151,8 @@ def cases_of(args) -> list:
 
 def parse_args(argv=None):
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--filters", default="all", help="comma list or 'all' (default all)")
+    p.add_argument("--filters", default="all",
+                   help="comma list or 'all' (default all: every filter the config's inputs can run)")
     p.add_argument("--maneuvers", default="dlc,sine,slalom,step,launch", help="comma list (default all five)")
     p.add_argument("--speed", default="80", help="km/h, comma list (default 80)")
     p.add_argument("--mu", default="0.35,0.85", help="road frictions, comma list (default 0.35,0.85)")
@@ -178,8 +178,12 @@ def parse_args(argv=None):
 
 def main(argv=None) -> int:
     args = parse_args(argv)
-    filters = list(FILTERS) if args.filters == "all" else [f.strip() for f in args.filters.split(",")]
     config = Path(args.config).resolve()
+    try:
+        filters = runnable(load_config(config), parse_filters(args.filters), every=args.filters == "all")
+    except CanestError as exc:
+        print(exc, file=sys.stderr)
+        return 2
     workdir = Path(args.workdir) / hashlib.sha1(config.read_bytes()).hexdigest()[:8]
     cases = cases_of(args)
     started = time.perf_counter()

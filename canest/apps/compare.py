@@ -9,11 +9,12 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import sys
 from dataclasses import dataclass
 
 import numpy as np
 
-from canest.errors import UsageError
+from canest.errors import ConfigError, UsageError
 from canest.apps.evaluate import DISPLAY, as_json, score
 from canest.apps.replay import replay
 from canest.estimation import catalog
@@ -38,12 +39,40 @@ def with_filter(config: Config, name: str) -> Config:
     The configured model stays where the filter runs on it (so ``ckf`` and ``gfckf`` run on the
     tire-force model for the DICI-GFCKF comparison); otherwise the catalog's model for the filter
     (the single-track model, or the one the filter needs: ``dckf``, ``dici-gfckf``).
+    A filter whose model needs inputs the config does not map (``jckf`` and ``dckf`` the motor torques) is a
+    ConfigError naming them: run without them, it read every missing input as 0.
     """
-    model = config.estimator.model
-    if catalog.misfit(name, model):
-        model = catalog.model_for(name)
+    model, missing = model_of(config, name)
+    if missing:
+        raise ConfigError(f"{config.path}: filter '{name}' (on model '{model}') needs {', '.join(missing)}; "
+                          f"map them in input.signals or choose another filter")
     est = dataclasses.replace(config.estimator, filter=name, model=model, factorization=None, filter_options={})
     return dataclasses.replace(config, estimator=est)
+
+
+def model_of(config: Config, name: str) -> tuple[str, list]:
+    """The model filter ``name`` runs on in a comparison (the configured one where it fits, else the catalog's),
+    and the inputs the two need that the config does not map."""
+    model = config.estimator.model
+    model = model if not catalog.misfit(name, model) else catalog.model_for(name)
+    return model, catalog.unmet(catalog.CATALOG[model].inputs_for(name), config.signals)
+
+
+def runnable(config: Config, names, every: bool) -> list:
+    """The filters of ``names`` the config's inputs can run. ``every`` (``--filters all``): the others are left
+    out, saying so on stderr; else one that cannot run is a ConfigError naming what it needs."""
+    run, skipped = [], []
+    for name in names:
+        model, missing = model_of(config, name)
+        if missing:
+            skipped.append(f"{name} (on model {model}) needs {', '.join(missing)}")
+        else:
+            run.append(name)
+    if skipped and not every:
+        raise ConfigError(f"{config.path}: cannot run {'; '.join(skipped)}")
+    if skipped:
+        print("not run, inputs not mapped: " + "; ".join(skipped), file=sys.stderr)
+    return run
 
 
 def run_filter(config: Config, log_path, truth: dict, name: str, skip: float = 0.5, **reading) -> FilterRun:

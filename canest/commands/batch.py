@@ -12,7 +12,7 @@ from canest.apps.batch import CONNECT_TIMEOUT_S, Stop, run_batch
 from canest.apps.batch_plan import FLEET_SUMMARY
 from canest.apps.fleet_report import fleet_json, fleet_table, plot_errors, totals
 from canest.commands.common import FORMATTER, add_config, add_log_reading, config_from_args, log_reading
-from canest.apps.compare import parse_filters
+from canest.apps.compare import parse_filters, runnable
 from canest.errors import DependencyError
 
 EPILOG = """examples:
@@ -48,7 +48,9 @@ def register(subparsers) -> None:
     add_config(p)
     add_log_reading(p)
     p.add_argument("--out", "-o", required=True, help="results folder")
-    p.add_argument("--filters", default=None, help="comma-separated filters to sweep (default: the config's)")
+    p.add_argument("--filters", default=None,
+                   help="comma-separated filters to sweep, or 'all' (every filter the config's inputs can run; "
+                        "default: the config's)")
     p.add_argument("--scheduler", help="address of a running Dask scheduler, e.g. tcp://host:8786")
     p.add_argument("--connect-timeout", type=float, default=CONNECT_TIMEOUT_S, metavar="SECONDS",
                    help=f"give up on --scheduler after this long (default {CONNECT_TIMEOUT_S:g})")
@@ -82,7 +84,8 @@ def run(args) -> int:
     if args.plot:  # before the batch, not after it
         DependencyError.require("matplotlib", "--plot", "pip install 'canest[plot]'")
     config = config_from_args(args)
-    filters = parse_filters(args.filters) if args.filters else [config.estimator.filter]
+    filters = (runnable(config, parse_filters(args.filters), every=args.filters == "all") if args.filters
+               else [config.estimator.filter])
     say = print if not args.json else lambda *line: print(*line, file=sys.stderr)
     summary_csv = Path(args.out) / FLEET_SUMMARY
     started = time.perf_counter()

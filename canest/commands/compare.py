@@ -5,7 +5,8 @@ import json
 import sys
 
 from canest.commands.common import FORMATTER, add_config, add_log_reading, config_from_args, log_reading
-from canest.apps.compare import comparison_json, format_comparison, parse_filters, plot_comparison, run_filter
+from canest.apps.compare import (comparison_json, format_comparison, parse_filters, plot_comparison, run_filter,
+                                 runnable)
 from canest.apps.evaluate import read_table
 from canest.errors import DependencyError
 
@@ -28,7 +29,8 @@ def register(subparsers) -> None:
     p.add_argument("truth", help="truth CSV from canest simulate")
     add_config(p)
     add_log_reading(p)
-    p.add_argument("--filters", default="all", help="'all' or a comma-separated list (default all)")
+    p.add_argument("--filters", default="all",
+                   help="'all' (every filter the config's inputs can run) or a comma-separated list (default all)")
     p.add_argument("--skip", type=float, default=0.5, help="seconds at the start to leave out (default 0.5)")
     p.add_argument("--plot", help="PNG with estimate vs truth and the errors of every filter")
     p.add_argument("--json", action="store_true", help="print the comparison as JSON (progress lines go to stderr)")
@@ -39,7 +41,7 @@ def run(args) -> int:
     if args.plot:  # before the replays, not after them
         DependencyError.require("matplotlib", "--plot", "pip install 'canest[plot]'")
     config = config_from_args(args)
-    names = parse_filters(args.filters)
+    names = runnable(config, parse_filters(args.filters), every=args.filters == "all")
     truth = read_table(args.truth)
     runs = []
     for name in names:
