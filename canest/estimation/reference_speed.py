@@ -43,7 +43,6 @@ TORQUES = INPUT_GROUPS["motor_torques"]
 FREE_ROLLING_USAGE = 0.1  # |Fx| / Fz below which a tire is in its linear range
 UNDRIVEN_USAGE = 0.02  # |Fx| / Fz of a pair that measures the speed alone: an undriven axle's rolling resistance
 PAIR_SETTLE = 0.5  # s a pair must have been undriven before it anchors the speed alone
-PAIRS = ((0, slice(0, 2)), (1, slice(2, 4)))  # (index, wheels): the front pair, the rear pair
 BRAKING = 0.5  # m/s^2 of deceleration beyond what drag and rolling resistance give: the brakes are on
 WHEEL_ACCELERATION_TOLERANCE = 0.5  # m/s^2 between R dw/dt and the measured ax
 DRIFT = 0.1  # m/s per s of integration
@@ -83,9 +82,9 @@ class ReferenceSpeed:
         self.wheel_radius = wheel_radius
         self.slip_stiffness = slip_stiffness
         self.anchored_std = anchored_std
-        # the pairs of an undriven axle: at a steady speed ax shows no drive force, but drag and rolling need some
-        self.undriven_axles = [(pair, wheels) for pair, wheels in PAIRS
-                               if (drive_front_share if pair == 0 else 1.0 - drive_front_share) == 0.0]
+        # the undriven axle's wheels, and the share of front_excess that brings their pair to the four wheels' mean;
+        # none where both axles drive (at a steady speed ax shows no drive force, but drag and rolling need some)
+        self.undriven = {1.0: (slice(2, 4), 0.5), 0.0: (slice(0, 2), -0.5)}.get(drive_front_share)
         self.reset()
 
     def reset(self) -> None:
@@ -93,7 +92,7 @@ class ReferenceSpeed:
         self.last_t = None
         self.anchored_at = None
         self.anchor_std = self.anchored_std
-        self.settled_at = [math.inf, math.inf]  # per pair (front, rear): from when it may anchor the speed alone
+        self.settled_at = math.inf  # from when the undriven pair may anchor the speed alone
 
     def update(self, t: float, acceleration: float, wheel_speeds, wheel_accelerations, usage,
                front_excess: float = 0.0) -> tuple[float, float]:
@@ -108,13 +107,15 @@ class ReferenceSpeed:
         radius = self.wheel_radius
         in_step = [abs(radius * a - acceleration) < WHEEL_ACCELERATION_TOLERANCE for a in wheel_accelerations]
         free = [step and abs(x) < FREE_ROLLING_USAGE for step, x in zip(in_step, usage)]
-        if self.speed is None or t - self.last_t > MAX_GAP:  # nothing known of the pairs' last PAIR_SETTLE s
-            self.settled_at = [t + PAIR_SETTLE, t + PAIR_SETTLE]
-        if all(free) or self.speed is None or t - self.last_t > MAX_GAP:
+        restart = self.speed is None or t - self.last_t > MAX_GAP
+        if restart:  # nothing known of what the pair transmitted over the last PAIR_SETTLE s
+            self.settled_at = t + PAIR_SETTLE
+        if all(free) or restart:
             self._anchor(t, slip_free_speed(wheel_speeds, usage, radius, self.slip_stiffness), self.anchored_std)
         else:
             self.speed += acceleration * (t - self.last_t)
-        self._undriven_pair(t, acceleration, wheel_speeds, usage, in_step, front_excess)
+        if self.undriven is not None:
+            self._undriven_pair(t, acceleration, wheel_speeds, usage, in_step, front_excess)
         self.last_t = t
         return self.speed, self._std(t)
 
@@ -125,18 +126,12 @@ class ReferenceSpeed:
         at a steady speed ax shows no drive force, yet drag and rolling resistance need one (a rear-driven car at
         30 m/s: 0.14 m/s of slip). Braking harder than ``BRAKING`` no pair counts as undriven: friction brakes act
         on both axles, and motor torques do not show them."""
-        braking = acceleration < -BRAKING
-        for pair, wheels in PAIRS:
-            if braking or any(abs(x) >= UNDRIVEN_USAGE for x in usage[wheels]):
-                self.settled_at[pair] = t + PAIR_SETTLE
-        if self.anchored_at == t:
-            return
-        for pair, wheels in self.undriven_axles:
-            if t >= self.settled_at[pair] and all(in_step[wheels]):
-                excess = 0.5 * front_excess if pair else -0.5 * front_excess
-                speed = slip_free_speed(wheel_speeds[wheels], usage[wheels], self.wheel_radius, self.slip_stiffness)
-                self._anchor(t, speed + excess, math.sqrt(2.0) * self.anchored_std)
-                return
+        wheels, excess = self.undriven
+        if acceleration < -BRAKING or any(abs(x) >= UNDRIVEN_USAGE for x in usage[wheels]):
+            self.settled_at = t + PAIR_SETTLE
+        if self.anchored_at != t and t >= self.settled_at and all(in_step[wheels]):
+            speed = slip_free_speed(wheel_speeds[wheels], usage[wheels], self.wheel_radius, self.slip_stiffness)
+            self._anchor(t, speed + excess * front_excess, math.sqrt(2.0) * self.anchored_std)
 
     def _std(self, t: float) -> float:
         return math.hypot(self.anchor_std, DRIFT * (t - self.anchored_at))
