@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from canest.apps.compare import parse_filters, runnable, with_filter  # noqa: E402
+from canest.apps.compare import runnable, with_filter  # noqa: E402
 from canest.apps.evaluate import DISPLAY, counts, pool, read_table, summarize  # noqa: E402
 from canest.apps.replay import replay  # noqa: E402
 from canest.config import DEFAULT_CONFIG, load_config  # noqa: E402
@@ -180,7 +180,7 @@ def main(argv=None) -> int:
     args = parse_args(argv)
     config = Path(args.config).resolve()
     try:
-        filters = runnable(load_config(config), parse_filters(args.filters), every=args.filters == "all")
+        filters = runnable(load_config(config), args.filters)
     except CanestError as exc:
         print(exc, file=sys.stderr)
         return 2

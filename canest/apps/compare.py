@@ -58,17 +58,17 @@ def model_of(config: Config, name: str) -> tuple[str, list]:
     return model, catalog.unmet(catalog.CATALOG[model].inputs_for(name), config.signals)
 
 
-def runnable(config: Config, names, every: bool) -> list:
-    """The filters of ``names`` the config's inputs can run. ``every`` (``--filters all``): the others are left
-    out, saying so on stderr; else one that cannot run is a ConfigError naming what it needs."""
+def runnable(config: Config, text: str) -> list:
+    """The filters of a ``--filters`` value (:func:`parse_filters`) the config's inputs can run. With ``all`` the
+    others are left out, saying so on stderr; a named one that cannot run is a ConfigError naming what it needs."""
     run, skipped = [], []
-    for name in names:
+    for name in parse_filters(text):
         model, missing = model_of(config, name)
         if missing:
             skipped.append(f"{name} (on model {model}) needs {', '.join(missing)}")
         else:
             run.append(name)
-    if skipped and not every:
+    if skipped and text != "all":
         raise ConfigError(f"{config.path}: cannot run {'; '.join(skipped)}")
     if skipped:
         print("not run, inputs not mapped: " + "; ".join(skipped), file=sys.stderr)

@@ -12,7 +12,7 @@ from canest.apps.batch import CONNECT_TIMEOUT_S, Stop, run_batch
 from canest.apps.batch_plan import FLEET_SUMMARY
 from canest.apps.fleet_report import fleet_json, fleet_table, plot_errors, totals
 from canest.commands.common import FORMATTER, add_config, add_log_reading, config_from_args, log_reading
-from canest.apps.compare import parse_filters, runnable
+from canest.apps.compare import runnable
 from canest.errors import DependencyError
 
 EPILOG = """examples:
@@ -84,8 +84,7 @@ def run(args) -> int:
     if args.plot:  # before the batch, not after it
         DependencyError.require("matplotlib", "--plot", "pip install 'canest[plot]'")
     config = config_from_args(args)
-    filters = (runnable(config, parse_filters(args.filters), every=args.filters == "all") if args.filters
-               else [config.estimator.filter])
+    filters = runnable(config, args.filters) if args.filters else [config.estimator.filter]
     say = print if not args.json else lambda *line: print(*line, file=sys.stderr)
     summary_csv = Path(args.out) / FLEET_SUMMARY
     started = time.perf_counter()

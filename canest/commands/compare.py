@@ -5,8 +5,7 @@ import json
 import sys
 
 from canest.commands.common import FORMATTER, add_config, add_log_reading, config_from_args, log_reading
-from canest.apps.compare import (comparison_json, format_comparison, parse_filters, plot_comparison, run_filter,
-                                 runnable)
+from canest.apps.compare import comparison_json, format_comparison, plot_comparison, run_filter, runnable
 from canest.apps.evaluate import read_table
 from canest.errors import DependencyError
 
@@ -41,7 +40,7 @@ def run(args) -> int:
     if args.plot:  # before the replays, not after them
         DependencyError.require("matplotlib", "--plot", "pip install 'canest[plot]'")
     config = config_from_args(args)
-    names = runnable(config, parse_filters(args.filters), every=args.filters == "all")
+    names = runnable(config, args.filters)
     truth = read_table(args.truth)
     runs = []
     for name in names:
