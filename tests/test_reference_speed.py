@@ -162,3 +162,12 @@ def test_a_gap_in_the_inputs_takes_the_wheels_again():
     ref.update(0.01, 2.0, np.full(4, 60.0), np.full(4, 30.0), np.full(4, 0.4))
     speed, std = ref.update(0.01 + 2 * MAX_GAP, 2.0, np.full(4, 60.0), np.full(4, 30.0), np.full(4, 0.4))
     assert speed == pytest.approx(RADIUS * 60.0 / (1 + 0.4 / STIFFNESS)) and std == pytest.approx(ANCHORED_STD)
+
+
+def test_time_running_backwards_takes_the_wheels_again():
+    """A log whose clock jumps back (two drives concatenated) must not integrate ax over a negative interval."""
+    ref = reference()
+    ref.update(10.0, 0.0, np.full(4, 50.0), ROLLING, ROLLING)
+    ref.update(10.01, 2.0, np.full(4, 60.0), np.full(4, 30.0), np.full(4, 0.4))
+    speed, std = ref.update(3.0, 2.0, np.full(4, 60.0), np.full(4, 30.0), np.full(4, 0.4))
+    assert speed == pytest.approx(RADIUS * 60.0 / (1 + 0.4 / STIFFNESS)) and std == pytest.approx(ANCHORED_STD)

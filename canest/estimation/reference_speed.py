@@ -107,7 +107,7 @@ class ReferenceSpeed:
         radius = self.wheel_radius
         in_step = [abs(radius * a - acceleration) < WHEEL_ACCELERATION_TOLERANCE for a in wheel_accelerations]
         free = [step and abs(x) < FREE_ROLLING_USAGE for step, x in zip(in_step, usage)]
-        restart = self.speed is None or t - self.last_t > MAX_GAP
+        restart = self.speed is None or not 0.0 <= t - self.last_t <= MAX_GAP  # a gap, or time ran backwards
         if restart:  # nothing known of what the pair transmitted over the last PAIR_SETTLE s
             self.settled_at = t + PAIR_SETTLE
         if all(free) or restart:
