@@ -22,7 +22,7 @@ from canest.errors import ConfigError
 from canest.estimation.calibration_blocks import BlockMeans
 from canest.estimation.calibration_state import RELOAD_INFLATION, CalibrationStore
 from canest.estimation.learned_parameters import NAMES, parameters
-from canest.estimation.online_calibration import APPLY_EVIDENCE, OnlineCalibration
+from canest.estimation.online_calibration import APPLY_EVIDENCE, MAX_CORRELATION, InnovationSpread, OnlineCalibration
 from canest.estimation import stiffness_window
 from canest.estimation.stiffness_window import LATENCY, WINDOW, FitWorker, StiffnessFit, fit_window
 from canest.models.output_error import Drive, DriveRows
@@ -733,3 +733,13 @@ def test_an_outlier_is_gated_against_the_noise_measured_before_it_and_widens_tha
     calibration._update(50.0, float(calibration.x[ay]), H, 0.1, "kinematic")
     assert calibration.updates["gated"] == gated + 1 and np.array_equal(calibration.x, before)
     assert calibration.spread["kinematic"].noise() < 3.0 * measured
+
+
+def test_the_innovations_correlation_is_measured_between_consecutive_blocks_only():
+    """Innovations equal in pairs of consecutive blocks, the pairs a second apart and of alternating sign: the
+    noise is as correlated as it gets; paired across the gaps, it read as uncorrelated."""
+    spread, a = InnovationSpread(), 0.3
+    for pair in range(20):
+        for block in range(2):
+            spread.add((-1) ** pair * a, 0.0, 10.0, pair * 1.0 + block * 0.1)
+    assert spread.noise() == pytest.approx(a * a * (1 + MAX_CORRELATION) / (1 - MAX_CORRELATION))

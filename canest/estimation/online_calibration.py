@@ -89,6 +89,7 @@ NOISE = {"kinematic": 0.1, "steering": math.radians(0.5), "longitudinal": 0.1,  
          "standstill": math.radians(0.05)}  # errors' correlation in time and the identities' model error
 SPREAD_UPDATES = 20  # an identity's innovations averaged into its measured noise (:class:`InnovationSpread`)
 SPREAD_WARMUP = 10  # innovations of an identity seen before it learns: its spread must be known first
+CONSECUTIVE = 1.5  # blocks: two innovations this close in time are consecutive (:class:`InnovationSpread`)
 MAX_CORRELATION = 0.95  # of an identity's consecutive innovations, as measured (:meth:`_noise`)
 SECONDS_PER_HOUR = 3600.0
 NEEDED = ("yaw_rate", "ay", "steering_wheel_angle", *WHEEL_SPEEDS)
@@ -121,6 +122,7 @@ class OnlineCalibration:
         self.gated_fits = 0  # window fits gated in a row
         self.kinematic_offsets = (0.0, 0.0)  # ay, yaw rate: :meth:`_kinematic_offsets`, once per block
         self.spread = {kind: InnovationSpread() for kind in NOISE}  # :meth:`_noise`
+        self.block_time = 0.0  # s, the end of the block being learned from
         if store is not None and self.enabled:
             saved = store.load(self.specs)
             if saved is not None:
@@ -167,7 +169,7 @@ class OnlineCalibration:
         R = self._noise(kind, noise)
         spread = self.spread.get(kind)
         if spread is not None:  # measured after R was taken: an innovation never widens its own gate
-            spread.add(innovation, predicted, GATE * math.sqrt(predicted + (R or noise * noise)))
+            spread.add(innovation, predicted, GATE * math.sqrt(predicted + (R or noise * noise)), self.block_time)
         if R is None:
             return
         S = predicted + R
@@ -361,6 +363,7 @@ class OnlineCalibration:
             self._stiffness_update(fit)
         block = self.blocks.add(sample)
         if block is not None:
+            self.block_time = sample.t
             self._report = None
             self.excited[:] = False
             self._learn(block)
@@ -475,7 +478,9 @@ class InnovationSpread:
     innovations (as :mod:`canest.models.output_error` widens its intervals) taken about their mean: the
     parameters' error at the start is an innovation that stays (on the banked road ``c`` of -0.31 made
     consecutive innovations correlate 0.97 and held the speed scale at the configured 1.0 for 50 s), not noise
-    that repeats. Means over all innovations until ``SPREAD_UPDATES`` were seen, then moving ones: a
+    that repeats. Only the innovations of consecutive blocks are paired: an identity that skipped blocks (a bend
+    not steady, a block dropped) would pair across the gap errors that had time to decorrelate, reading the
+    correlation low. Means over all innovations until ``SPREAD_UPDATES`` were seen, then moving ones: a
     longer memory kept the start's large innovations (the parameters still at their prior) for 20 s and slowed
     every identity on the banked road. Gated innovations count too (a noisier IMU must widen the gate),
     clipped at the gate (a pothole must not). The longitudinal identity's ax, a mean over ``HISTORY`` blocks
@@ -491,19 +496,21 @@ class InnovationSpread:
         self.predicted = 0.0  # mean of their predicted variances
         self.lagged = 0.0  # mean of the products of consecutive innovations
         self.last = None
+        self.last_time = -math.inf
 
-    def add(self, innovation: float, predicted: float, limit: float) -> None:
-        """One innovation (clipped to +-``limit``) whose variance the parameters' uncertainty predicted."""
+    def add(self, innovation: float, predicted: float, limit: float, time: float) -> None:
+        """One innovation (clipped to +-``limit``) whose variance the parameters' uncertainty predicted, from the
+        block that ended at ``time`` (s)."""
         innovation = min(max(innovation, -limit), limit)
         self.seen = min(self.seen + 1, SPREAD_UPDATES)
         weight = 1.0 / self.seen
         self.mean += weight * (innovation - self.mean)
         self.square += weight * (innovation * innovation - self.square)
         self.predicted += weight * (predicted - self.predicted)
-        if self.last is not None:
+        if 0.0 < time - self.last_time <= CONSECUTIVE * BLOCK:
             self.pairs = min(self.pairs + 1, SPREAD_UPDATES)
             self.lagged += (innovation * self.last - self.lagged) / self.pairs
-        self.last = innovation
+        self.last, self.last_time = innovation, time
 
     def noise(self) -> float | None:
         """The measured noise variance, None before ``SPREAD_WARMUP`` innovations were seen."""
