@@ -240,11 +240,13 @@ class OnlineCalibration:
         H[SPEED], H[GYRO], H[AY] = block.wheel_speed * (block.yaw_rate - bias), -s * block.wheel_speed, 1.0
         h = identities.measured_ay(block.wheel_speed, block.yaw_rate, s, bias, self.x[AY])
         self._update(block.ay, h, H, NOISE["kinematic"], "kinematic")
-        if block.wheel_speed >= MIN_STEER_SPEED and abs(turning) < LINEAR_AY:
+        if block.wheel_speed >= MIN_STEER_SPEED:
             self._steering_update(block)
 
     def _steering_update(self, block: Block) -> None:
-        """``delta_sw = offset + R (k L r / v + u v r)``, ``u = k K_us``, ``r = r_m - b_r``, ``v = s v_w``.
+        """``delta_sw = offset + R (k L r / v + u v r)``, ``u = k K_us``, ``r = r_m - b_r``, ``v = s v_w``, while
+        ``|v r| < LINEAR_AY`` (the linear single-track model; ``v r`` at the parameters this block's kinematic update
+        left).
 
         ``v r`` is the steady bend's lateral acceleration (the kinematic identity's ``ay_m - c``), taken from the
         wheels and the gyro rather than the accelerometer: an ay that vibrates (0.77 m/s^2 in a block's mean on
@@ -271,6 +273,8 @@ class OnlineCalibration:
         ratio, L = p.steering_ratio, p.wheelbase
         v, r = s * block.wheel_speed, block.yaw_rate - bias
         ay = v * r
+        if abs(ay) >= LINEAR_AY:  # beyond the linear single-track model
+            return
         h = identities.steady_steering_wheel_angle(v, r, ay, offset, k * ratio, L, u / k)
         H = np.zeros(len(self.x))
         H[SPEED] = ratio * r * (u * block.wheel_speed - k * L / (s * v))
