@@ -43,5 +43,5 @@ def parameters(vehicle: VehicleParams) -> tuple:
 
 NAMES = ("speed", "gyro_bias", "ay_bias", "steering_offset", "ratio", "understeer", "ax_bias", "front", "rear")
 SPEED, GYRO, AY, OFFSET, RATIO, UNDERSTEER, AX, FRONT, REAR = range(len(NAMES))
-APPLIED = (SPEED, GYRO, AY, OFFSET, RATIO, AX, FRONT, REAR)
+APPLIED = (SPEED, GYRO, RATIO, AX, FRONT, REAR)  # the steering and lateral offsets are not: a bank shows as both
 STIFFNESS = (FRONT, REAR)  # factors on the configured cornering stiffnesses, learned by the window fit

@@ -53,23 +53,26 @@ MIN_BENDS = 2.0  # s of a window turning (v r) between BEND_AY and the fit's lin
 BEND_AY = 0.5  # m/s^2
 MAX_HALF_WIDTH = 0.3  # a fit whose 95 % interval of a stiffness factor is wider saw too few bends: not used
 STIFFNESS_NAMES = ("front", "rear")
+FITTED = (*STIFFNESS_NAMES, "ratio", "steering_offset", "gyro_bias", "ay_bias", "speed")  # the learner's too
 CLOSE_WAIT = 1.0  # s
 WORKER_ENV = {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}  # one core at most
 WORKER_NICE = 5
 
 
 @dataclass
-class StiffnessFit:
-    """One window's stiffness factors (front, rear) on the configured ones, their covariance, its seconds."""
+class WindowFit:
+    """One window's parameters (:data:`FITTED`, the stiffness factors first), their covariance, its seconds."""
 
+    names: tuple
     values: np.ndarray
     covariance: np.ndarray
     seconds: float
 
 
-def fit_window(vehicle: VehicleParams, drive: output_error.Drive) -> StiffnessFit | None:
-    """The output-error fit of one window (in the worker): the two stiffness factors, or None when the window
-    cannot pin them down: fewer than ``MIN_BENDS`` s of bends (not fitted: a straight's Jacobian is singular, and
+def fit_window(vehicle: VehicleParams, drive: output_error.Drive) -> WindowFit | None:
+    """The output-error fit of one window (in the worker): the parameters it shares with the online calibration
+    (:data:`FITTED`; the bank is held at 0, so ``ay_bias`` is the bias less the bank's gravity, as the learner's),
+    or None when the window cannot pin the stiffnesses down: fewer than ``MIN_BENDS`` s of bends (not fitted: a straight's Jacobian is singular, and
     its pseudo-inverse called the stiffnesses certain), an interval of either wider than ``MAX_HALF_WIDTH`` or not
     above 0, or a factor at its bound."""
     turning = np.abs(output_error.turning_ay(drive))
@@ -84,9 +87,10 @@ def fit_window(vehicle: VehicleParams, drive: output_error.Drive) -> StiffnessFi
     if not np.all((half > 0.0) & (half < MAX_HALF_WIDTH)) or any(not p.low < v < p.high
                                                                   for p, v in zip(bounds, values)):
         return None
-    std = half / output_error.CONFIDENCE
-    covariance = fit.correlation[np.ix_(index, index)] * np.outer(std, std)
-    return StiffnessFit(values, covariance, drive.seconds)
+    fitted = [fit.names.index(name) for name in FITTED]
+    std = fit.half_widths[fitted] / output_error.CONFIDENCE
+    covariance = fit.correlation[np.ix_(fitted, fitted)] * np.outer(std, std)
+    return WindowFit(FITTED, fit.values[fitted], covariance, drive.seconds)
 
 
 class WorkerLost(Exception):
@@ -116,7 +120,7 @@ class FitWorker:
         except OSError as exc:
             raise WorkerLost(f"{exc}, exit status {self.process.poll()}") from None
 
-    def result(self) -> StiffnessFit | None:
+    def result(self) -> WindowFit | None:
         """The oldest submission's fit, waiting for it."""
         try:
             return pickle.load(self.process.stdout)
@@ -167,7 +171,7 @@ class StiffnessWindow:
         self.enabled = _usable_rate(dt, ticks)
         self.fits = {"used": 0, "unexcited": 0, "short": 0, "lost": 0}
 
-    def add(self, sample) -> StiffnessFit | None:
+    def add(self, sample) -> WindowFit | None:
         """Take one tick's raw sample; a fit that is due now, or None."""
         if not self.enabled:
             return None
@@ -201,7 +205,7 @@ class StiffnessWindow:
             return
         self.due.append(self.t + LATENCY)
 
-    def _take(self) -> StiffnessFit | None:
+    def _take(self) -> WindowFit | None:
         self.due.pop(0)
         try:
             fit = self.worker.result()
