@@ -263,7 +263,8 @@ def test_the_stiffnesses_are_learned_from_a_window_of_the_drive_and_reach_the_mo
     pipeline, history, _ = learned
     calibration = pipeline.calibration
     front, rear = NAMES.index("front"), NAMES.index("rear")
-    assert calibration.updates["window"] == len(FITTED) and calibration.window.fits == {"used": 1, "unexcited": 0, "short": 0, "lost": 0}
+    assert calibration.updates["window"] == len(FITTED)
+    assert calibration.window.fits == {"used": 1, "unexcited": 0, "short": 0, "lost": 0}
     assert calibration.x[front] == pytest.approx(WRONG.stiffness_scale_front, rel=0.1)
     assert calibration.x[rear] == pytest.approx(WRONG.stiffness_scale_rear, rel=0.1)
     assert calibration.converged[front] and calibration.converged[rear]
@@ -799,3 +800,12 @@ def test_the_innovations_correlation_is_measured_between_consecutive_blocks_only
         for block in range(2):
             spread.add((-1) ** pair * a, 0.0, 10.0, pair * 1.0 + block * 0.1)
     assert spread.noise() == pytest.approx(a * a * (1 + MAX_CORRELATION) / (1 - MAX_CORRELATION))
+
+
+def test_at_a_slow_tick_rate_consecutive_blocks_are_still_paired(config):
+    """At 5 Hz a block is one 0.2 s tick: paired by BLOCK's 0.1 s, no two innovations ever were."""
+    calibration = OnlineCalibration(config.vehicle, NAMES_IN, 0.2)
+    spread, a = calibration.spread["kinematic"], 0.3
+    for k in range(20):
+        spread.add(a, 0.0, 10.0, k * 0.2)  # the same error in every block: as correlated as it gets
+    assert spread.pairs == 19

@@ -39,7 +39,7 @@ CALIBRATION_UNITS = {"speed": ("x", 1.0), "gyro_bias": ("deg/s", DEG), "ay_bias"
 
 
 def calibration_state(page: dict) -> str:
-    """``converged`` (its correction applied), ``learning`` (driving excited it) or ``prior`` (not yet)."""
+    """``converged`` (its std below its threshold), ``learning`` (driving excited it) or ``prior`` (not yet)."""
     return "converged" if page["CalConverged"] else "learning" if page["CalLearned"] else "prior"
 
 

@@ -135,8 +135,8 @@ class Estimator:
         self.steering_zero.use_vehicle(self.vehicle)
 
     def use_kinematic_offsets(self, ay: float, yaw_rate: float) -> None:
-        """The online calibration's learned ay and yaw-rate offsets not yet applied to the inputs, for the
-        kinematic checks (:meth:`StateJudge.use_kinematic_offsets`)."""
+        """The online calibration's learned ay and yaw-rate offsets not applied to the inputs (ay's never, a bank;
+        the gyro bias's until it converged), for the kinematic checks (:meth:`StateJudge.use_kinematic_offsets`)."""
         self.judge.use_kinematic_offsets(ay, yaw_rate)
 
     def reset(self) -> None:

@@ -96,7 +96,7 @@ class StateJudge:
 
     def use_kinematic_offsets(self, ay: float, yaw_rate: float) -> None:
         """Offsets still in the inputs' ay and yaw rate that the kinematic identity ``ay - c = v (r - b) + dvy/dt``
-        has learned (the online calibration's, not yet applied to the inputs): the kinematic checks take them out."""
+        has learned (the online calibration's, not applied to the inputs): the kinematic checks take them out."""
         self.kinematic_offsets = (ay, yaw_rate)
 
     def _kinematic_inputs(self, inputs) -> tuple:

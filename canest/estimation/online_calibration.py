@@ -50,8 +50,9 @@ wrong (:meth:`_follow`); the estimator's kinematic checks take them
 The output-error fit of each 30 s window of driving, run in a worker
 (:mod:`canest.estimation.stiffness_window`, :meth:`_window_update`), is a second source: the only one of
 ``front`` and ``rear``, the two cornering stiffnesses (factors on the configured ones, applied to the model, not
-the inputs: :attr:`stiffness`, ``Estimator.use_stiffness``), and the strongest of the ratio, the offsets, the
-gyro bias and the speed scale, which it fits alongside them.
+the inputs: :attr:`stiffness`, ``Estimator.use_stiffness``; the identities move them only through their
+covariance with what they measure), and the strongest of the ratio, the offsets, the gyro bias and the speed
+scale, which it fits alongside them.
 """
 from __future__ import annotations
 
@@ -87,7 +88,7 @@ MAX_AX = 2.0  # m/s^2: harder braking slips the wheels and pitches the body
 STANDSTILL = 0.05  # m/s
 GATE = 4.0  # innovation standard deviations
 MIN_EVIDENCE = 30.0  # s of excited blocks before a parameter counts as converged
-APPLY_EVIDENCE = 10.0  # s of excited blocks before a parameter is applied (gyro bias, offsets: once converged)
+APPLY_EVIDENCE = 10.0  # s of excited blocks before a parameter is applied (the gyro bias: once converged)
 REOPEN_AFTER = 3  # window fits gated in a row before the stiffnesses are relearned
 # std of a window fit's parameter beyond its interval: the linear model's error, measured over 4 windows of each of
 # 3 roads (seeds 3 and 7, flat and banked 3 deg): the linear tires read the plant's 2-3 % soft; the offsets,
@@ -122,7 +123,9 @@ class OnlineCalibration:
         self._report = None  # built by report() once per block
         self.index = {name: i for i, name in enumerate(names)}
         self.enabled = enabled and all(name in self.index for name in NEEDED)
-        self.blocks = BlockMeans(names, vehicle, max(1, round(BLOCK / dt))) if self.enabled else None
+        ticks = max(1, round(BLOCK / dt))
+        self.block_period = ticks * dt  # s: BLOCK at tick rates that divide it
+        self.blocks = BlockMeans(names, vehicle, ticks) if self.enabled else None
         self.history = deque(maxlen=HISTORY + 1)
         self.store = store
         self.last_save = None
@@ -130,7 +133,7 @@ class OnlineCalibration:
         self.window = StiffnessWindow(vehicle, names, dt) if self.enabled else None
         self.gated_fits = 0  # window fits gated in a row
         self.kinematic_offsets = (0.0, 0.0)  # ay, yaw rate: :meth:`_kinematic_offsets`, once per block
-        self.spread = {kind: InnovationSpread() for kind in NOISE}  # :meth:`_noise`
+        self.spread = self._new_spreads()  # :meth:`_noise`
         self.block_time = 0.0  # s, the end of the block being learned from
         if store is not None and self.enabled:
             saved = store.load(self.specs)
@@ -195,6 +198,9 @@ class OnlineCalibration:
         self.P = A @ self.P @ A.T + np.outer(K, K) * R
         self.excited |= (np.abs(H) * self.prior_std > 0.3 * math.sqrt(R)) & (K != 0.0)
         self.updates[kind] += 1
+
+    def _new_spreads(self) -> dict:
+        return {kind: InnovationSpread(self.block_period) for kind in NOISE}
 
     def _noise(self, kind: str, noise: float) -> float | None:
         """The variance of one ``kind`` update's noise: the configured ``noise``, or what its earlier innovations
@@ -466,7 +472,7 @@ class OnlineCalibration:
                     self.applied[i] = entry["applied"]
         variances = np.array([saved[name]["variance"] if name in saved else spec.std**2
                               for name, spec in zip(NAMES, self.specs)])
-        self.spread = {kind: InnovationSpread() for kind in NOISE}  # the noise is this drive's, measured anew
+        self.spread = self._new_spreads()  # the noise is this drive's, measured anew
         k, understeer = self.x[RATIO], self.x[UNDERSTEER]
         self.x[UNDERSTEER] = k * understeer  # the state's u = k K_us, its variance as if k and K_us were independent:
         variances[UNDERSTEER] = k * k * variances[UNDERSTEER] + understeer**2 * variances[RATIO]  # K_us's std grows
@@ -514,7 +520,8 @@ class InnovationSpread:
     correlation 0.75 as a factor of 7 where the shared blocks make 4: it learns the ax offset slower than it
     could)."""
 
-    def __init__(self):
+    def __init__(self, block_period: float = BLOCK):
+        self.block_period = block_period  # s between consecutive blocks
         self.seen = 0
         self.pairs = 0  # of consecutive innovations
         self.mean = 0.0  # of the innovations
@@ -533,7 +540,7 @@ class InnovationSpread:
         self.mean += weight * (innovation - self.mean)
         self.square += weight * (innovation * innovation - self.square)
         self.predicted += weight * (predicted - self.predicted)
-        if 0.0 < time - self.last_time <= CONSECUTIVE * BLOCK:
+        if 0.0 < time - self.last_time <= CONSECUTIVE * self.block_period:
             self.pairs = min(self.pairs + 1, SPREAD_UPDATES)
             self.lagged += (innovation * self.last - self.lagged) / self.pairs
         self.last, self.last_time = innovation, time

@@ -72,9 +72,9 @@ class WindowFit:
 def fit_window(vehicle: VehicleParams, drive: output_error.Drive) -> WindowFit | None:
     """The output-error fit of one window (in the worker): the parameters it shares with the online calibration
     (:data:`FITTED`; the bank is held at 0, so ``ay_bias`` is the bias less the bank's gravity, as the learner's),
-    or None when the window cannot pin the stiffnesses down: fewer than ``MIN_BENDS`` s of bends (not fitted: a straight's Jacobian is singular, and
-    its pseudo-inverse called the stiffnesses certain), an interval of either wider than ``MAX_HALF_WIDTH`` or not
-    above 0, or a factor at its bound."""
+    or None when the window cannot pin the stiffnesses down: fewer than ``MIN_BENDS`` s of bends (not fitted: a
+    straight's Jacobian is singular, and its pseudo-inverse called the stiffnesses certain), an interval of either
+    wider than ``MAX_HALF_WIDTH`` or not above 0, or a factor at its bound."""
     turning = np.abs(output_error.turning_ay(drive))
     bends = (turning >= BEND_AY) & (turning < output_error.LINEAR_AY)
     if bends.sum() * output_error.STEP < MIN_BENDS:
