@@ -809,3 +809,23 @@ def test_at_a_slow_tick_rate_consecutive_blocks_are_still_paired(config):
     for k in range(20):
         spread.add(a, 0.0, 10.0, k * 0.2)  # the same error in every block: as correlated as it gets
     assert spread.pairs == 19
+
+
+def test_a_parameter_the_window_tells_no_better_than_the_prior_is_left_out(config):
+    """At a constant speed the fit knows the gyro bias, c and the steering offset only as a combination (stds of
+    8 deg/s, 3.1 m/s^2 and 42 deg on a 45 s sine steer): taken whole, that combination carried the learner's
+    error in one of them into the others."""
+    calibration = OnlineCalibration(config.vehicle, NAMES_IN, 0.01)
+    fit = window_fit(0.7, 1.3, gyro_bias=0.03, ay_bias=0.8, steering_offset=0.16)
+    loose = [FITTED.index(name) for name in ("steering_offset", "gyro_bias", "ay_bias")]
+    std = np.sqrt(np.diag(fit.covariance))
+    std[loose] = [0.73, 0.14, 3.1]
+    correlation = np.eye(len(FITTED))
+    correlation[np.ix_(loose, loose)] = 0.999
+    np.fill_diagonal(correlation, 1.0)
+    calibration._window_update(WindowFit(FITTED, fit.values, correlation * np.outer(std, std), WINDOW))
+    for name in ("steering_offset", "gyro_bias", "ay_bias"):
+        i = NAMES.index(name)
+        assert calibration.x[i] == 0.0 and calibration.evidence[i] == 0.0, name
+    for name in ("front", "rear", "ratio", "speed"):
+        assert calibration.evidence[NAMES.index(name)] == WINDOW, name
