@@ -47,6 +47,16 @@ def rolled(seconds=PAIR_SETTLE, drive_front_share=1.0):
     return ref, ref.last_t
 
 
+def test_an_integrated_ax_that_vibrates_grows_the_uncertainty_as_its_random_walk():
+    """An IMU vibrating as the simulator's (ax density 0.06 m^2/s^3: 0.24 m/s per sqrt(s)) integrated for a second."""
+    ref = reference()
+    ref.update(0.0, 0.0, np.full(4, 50.0), ROLLING, ROLLING)
+    for k in range(1, 101):
+        speed, std = ref.update(k * 0.01, 3.0, np.full(4, 60.0), np.full(4, 9.0 / RADIUS), np.full(4, 0.4),
+                                ax_density=0.06)
+    assert std == pytest.approx(np.sqrt(ANCHORED_STD**2 + DRIFT**2 + 0.06 * 1.0))
+
+
 def test_a_wheel_out_of_step_with_the_imu_stops_the_anchoring_on_its_axle_even_without_torque():
     ref, t = rolled()
     locking = np.array([-20.0, 0.0, 0.0, 0.0])  # rad/s^2: one front wheel decelerating on its own

@@ -12,7 +12,9 @@ Per tick (:meth:`Estimator.step`, handed the resampler's sample):
 5. judge every fresh channel against the prior under the configured noise
    (:mod:`canest.estimation.validity`), then update with them
    (:mod:`canest.estimation.channels`): the lateral ones (ay, ax) only while
-   the lateral model holds;
+   the lateral model holds, an accelerometer channel's noise never below
+   what its samples show (:mod:`canest.estimation.measured_noise`: a
+   vibrating body);
 6. publish values, standard deviations (covering the model's error) and
    validity with its cause. A non-finite state or covariance, or a diverging
    filter, resets it (counted in ``resets``).
@@ -48,6 +50,7 @@ from canest.estimation.estimate import OUTPUT_STATES, Estimate
 from canest.estimation.gyro_hold import GyroHold
 from canest.estimation.inputs import WHEEL_SPEEDS, TickInputs
 from canest.estimation.judge import DIVERGENCE_NIS, StateJudge
+from canest.estimation.measured_noise import MeasuredNoise
 from canest.estimation.reference_speed import ReferenceSpeed, tick_usage
 from canest.estimation.steering_zero import steering_zero
 from canest.filters import Transition, make_filter
@@ -57,10 +60,15 @@ from canest.models.wheels import WheelGeometry
 from canest.settings import Config
 
 GYROS = ("yaw_rate", "yaw_rate_2")  # measurement channels read straight from a gyro
+ACCELEROMETERS = ("ax", "ay", "ax_2", "ay_2")  # measurement channels read straight from an accelerometer
 
 log = logging.getLogger("canest.estimator")
 
 DIVERGENCE_HOLD = 1.0  # s
+# s: the ax noise's density is read from means over this span (canest.estimation.measured_noise), long enough to see
+# a body's vibration as an integration over seconds does (the simulator's, correlated over 15 ms: 0.19-0.25 m/s/sqrt(s)
+# read for 0.24; over 30 ms spans 0.15-0.17), short enough that a clean drive's own ax reads below vx_from_ax
+AX_NOISE_SPAN = 0.1
 PER_WHEEL_KEYS = {"fy_": "lateral_force", "w_": "wheel_speed", "wheel_speed_": "wheel_speed", "mu_": "friction"}
 
 
@@ -118,6 +126,11 @@ class Estimator:
         self.reference_wheel_acceleration = WheelAcceleration()
         self.gyro_holds = {row: (name, GyroHold()) for row, name in enumerate(model.measurement_names)
                            if name in GYROS}
+        # the sensors' noise as their samples show it, kept through a filter reset (:mod:`measured_noise`)
+        self.ax_noise = MeasuredNoise(AX_NOISE_SPAN)
+        self.input_noise = {name: MeasuredNoise() for name in model.measurement_names
+                            if name in ACCELEROMETERS + GYROS}
+        self.integrates_ax = getattr(model, "vx_noise_key", "vx") == "vx_from_ax"
         self.steering_zero = steering_zero(config)
         self.stiffness = (1.0, 1.0)  # factors on the configured cornering stiffnesses (:meth:`use_stiffness`)
 
@@ -174,9 +187,15 @@ class Estimator:
         return True
 
     def _process_noise(self) -> np.ndarray:
-        """Q of this tick's prediction: the configured one (a binding whose model error scales with its state adds
-        to it)."""
-        return self.Q
+        """Q of this tick's prediction: the configured one, vx's never below the measured ax noise's density where
+        vx integrates the measured ax (:data:`AX_NOISE_SPAN`); a binding whose model error scales with its state
+        adds to it."""
+        density = self.ax_noise.density
+        if not self.integrates_ax or density is None or density * self.dt <= self.Q[self.vx, self.vx]:
+            return self.Q
+        Q = self.Q.copy()
+        Q[self.vx, self.vx] = density * self.dt
+        return Q
 
     def _road_wheel_angle(self, inputs: TickInputs) -> float:
         return self.steering_zero.angle(inputs) / self.vehicle.steering_ratio
@@ -206,7 +225,8 @@ class Estimator:
         acceleration = inputs.current("ax") + yaw_rate * vy
         delta = self._road_wheel_angle(inputs)
         front_excess = vx * (math.cos(delta) - 1.0) + (vy + self.vehicle.cg_to_front * yaw_rate) * math.sin(delta)
-        return self.reference_speed.update(t, acceleration, speeds, accelerations, usage, front_excess)
+        return self.reference_speed.update(t, acceleration, speeds, accelerations, usage, front_excess,
+                                           self.ax_noise.density or 0.0)
 
     def _derived(self, inputs: TickInputs, t: float, lateral_ok: bool) -> dict:
         """Channels computed from the inputs this tick: name -> (value, standard deviation, age).
@@ -249,6 +269,11 @@ class Estimator:
         t = sample.t
         inputs = TickInputs(sample)
         self.derived_ax.add_to(inputs)
+        if inputs.has("ax") and inputs.fresh["ax"]:
+            self.ax_noise.add(t - inputs.ages["ax"], inputs.values["ax"])
+        for name, noise in self.input_noise.items():
+            if inputs.has(name) and inputs.fresh[name]:
+                noise.add(t - inputs.ages[name], inputs.values[name])
         self.stale_before, self.stale_now = self.stale_now, frozenset(n for n, stale in inputs.stale.items() if stale)
         missing = inputs.missing_groups()
         if not inputs.any_present():
@@ -263,7 +288,7 @@ class Estimator:
         lateral_ok = not self.low_speed and inputs.has("steering_wheel_angle", "ay")
         channels = self._channels(inputs, t, lateral_ok)
         self.judge.record(channels, u, self.filter.x.copy(), self.filter.covariance.copy(), self.stale_before)
-        diverged = self._update(channels, inputs, u, lateral_ok, t)
+        diverged = self._update(self._measured(channels), inputs, u, lateral_ok, t)
         if self.step_times is not None:
             self.step_times.append(time.thread_time() - started)
         finite = all(np.all(np.isfinite(a)) for a in (self.filter.x, self.filter.P, self.filter.covariance))
@@ -294,6 +319,21 @@ class Estimator:
                                                        np.array([vx * math.tan(x[self.beta])]), 0.0)
         return float(self.geometry.slip_angles(v_long, v_lat)[0, 2:].mean())
 
+    def _measured(self, channels: ch.Channels) -> ch.Channels:
+        """The channels as the filter takes them: an accelerometer channel's std never below its noise as its samples
+        show it (:mod:`canest.estimation.measured_noise`); the consistency test keeps the configured one."""
+        std = channels.std.copy()
+        for row, name in enumerate(self.model.measurement_names):
+            if name in ACCELEROMETERS and self.input_noise[name].std is not None:
+                std[row] = max(std[row], self.input_noise[name].std)
+        return ch.Channels(channels.mask, channels.z, std, channels.ages)
+
+    def _gyro_noise(self, inputs: TickInputs) -> float:
+        """The largest ratio of a present gyro's measured noise to its configured one (1 while none is measured)."""
+        ratios = [self.input_noise[name].std / self.r_std[row] for row, (name, _) in self.gyro_holds.items()
+                  if inputs.has(name) and self.input_noise[name].std is not None]
+        return max(ratios, default=1.0)
+
     def _publish(self, t, mode, missing, inputs: TickInputs, lateral_ok: bool = False) -> Estimate:
         self.last_mode = mode
         if self.filter is None:
@@ -319,7 +359,7 @@ class Estimator:
         drift = self.judge.drift(inputs, vx, beta, math.hypot(std[self.beta], beta_model_std),
                                  reference.last_t != t or reference.anchored_at == t)
         carried = self.covariance_has_tire_error and not self.low_speed  # the model's Q has the tire error
-        std = self.judge.widen(std, index, ratios, 0.0 if carried else beta_model_std, drift)
+        std = self.judge.widen(std, index, ratios, 0.0 if carried else beta_model_std, drift, self._gyro_noise(inputs))
         values = {
             "vx": vx, "vy": vx * math.tan(beta), "beta": beta, "yaw_rate": x[self.yaw],
             "vx_std": std[self.vx], "vy_std": math.hypot(vx * std[self.beta] / math.cos(beta) ** 2,

@@ -24,6 +24,10 @@ Published standard deviations get these terms beyond the filter's covariance:
   standard deviation is scaled by ``sqrt(k)`` (innovation-driven, as a
   covariance-matching adaptive filter would scale Q, but on the published
   value only, so every filter's estimate stays what its paper gives);
+- the yaw rate's gyro noise as its samples show it, over the configured
+  (:mod:`canest.estimation.measured_noise`, a factor never below 1): a
+  vibrating gyro's coloured noise, which the prior follows, hides from the
+  innovations;
 - the sideslip's model error: a rear cornering stiffness off by a relative
   ``e`` moves the steady-state sideslip by ``e m a |ay| / (L C_r)`` (rear
   slip angle ``alpha_r = F_yr / C_r`` with ``F_yr = m ay a / L``), added in

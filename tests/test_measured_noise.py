@@ -1,0 +1,54 @@
+"""A sensor's noise read from its samples: the noise, not the motion, at a gyro's sampling rates, and its colour."""
+import numpy as np
+import pytest
+
+from canest.estimation.measured_noise import WARMUP, MeasuredNoise
+from canest.sim.sensors import Vibration
+
+SLALOM = (0.2, 0.5)  # rad/s, Hz: a yaw rate swinging 11 deg/s
+
+
+def measured(times, values) -> float | None:
+    noise = MeasuredNoise()
+    for t, value in zip(times, values):
+        noise.add(t, value)
+    return noise.std
+
+
+def sampled(rate: float, jitter: float, seconds: float, rng) -> np.ndarray:
+    return np.sort(np.arange(0.0, seconds, 1.0 / rate) + rng.uniform(0.0, jitter, int(seconds * rate)))
+
+
+@pytest.mark.parametrize("rate, jitter", [(100.0, 0.0), (100.0, 0.004), (50.0, 0.0)])
+def test_a_white_noise_is_read_at_its_std_and_a_slalom_s_motion_below_a_datasheet_gyro_s_noise(rate, jitter):
+    rng = np.random.default_rng(1)
+    t = sampled(rate, jitter, 20.0, rng)
+    stds = [measured(t[t < end], 0.002 * rng.standard_normal((t < end).sum())) for end in (5.0, 10.0, 15.0, 20.0)]
+    assert all(0.0017 < std < 0.0023 for std in stds), stds
+    amplitude, frequency = SLALOM
+    motion = amplitude * np.sin(2.0 * np.pi * frequency * t) + 0.5 * t
+    assert measured(t, motion) < 0.0012  # never above a datasheet gyro's 0.002 rad/s by the car's own motion
+
+
+def test_a_noise_correlated_over_15_ms_reads_above_its_std_as_a_filter_averaging_its_samples_sees_it():
+    """The simulator's body vibration (0.3 deg/s, correlated over 15 ms) beside a white 0.1 deg/s: the means of a
+    few samples scatter 1.9 times as much as a white noise's of the same variance (module docstring)."""
+    for seed in range(3):
+        rng = np.random.default_rng(seed)
+        vibration = Vibration(rng, np.radians(0.3), 0.0)
+        t = np.arange(0.0, 30.0, 0.01)
+        values = [vibration.at(ti) + np.radians(0.1) * rng.standard_normal() for ti in t]
+        assert 1.0 < measured(t, values) / np.radians(np.hypot(0.3, 0.1)) < 1.3
+
+
+def test_nothing_is_said_before_a_warmup_of_samples_and_time_running_backwards_starts_over():
+    t = np.arange(0.0, WARMUP + 0.2, 0.01)
+    assert measured(t[t < WARMUP], np.zeros((t < WARMUP).sum())) is None
+    noise = MeasuredNoise()
+    for ti in t:
+        noise.add(ti, 0.01 * (-1) ** round(ti / 0.01))
+    assert noise.std is not None
+    noise.add(0.1, 0.0)  # a replay looped back: what was measured belongs to another stretch
+    assert noise.std is None and list(noise.samples) == [(0.1, 0.0)]
+    noise.add(0.1, 1.0)  # a sample already seen adds nothing
+    assert list(noise.samples) == [(0.1, 0.0)]
