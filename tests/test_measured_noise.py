@@ -52,3 +52,34 @@ def test_nothing_is_said_before_a_warmup_of_samples_and_time_running_backwards_s
     assert noise.std is None and list(noise.samples) == [(0.1, 0.0)]
     noise.add(0.1, 1.0)  # a sample already seen adds nothing
     assert list(noise.samples) == [(0.1, 0.0)]
+
+
+def test_a_sparse_channel_is_measured_too_and_a_non_finite_sample_is_left_out():
+    """A 20 Hz channel's 30 ms spans would hold no sample at times: its spans are 1.5 sampling periods."""
+    rng = np.random.default_rng(3)
+    t = np.arange(0.0, 20.0, 0.05)
+    values = 0.002 * rng.standard_normal(len(t))
+    values[100] = np.nan
+    assert 0.0016 < measured(t, values) < 0.0024
+
+
+@pytest.mark.parametrize("model", ["single_track", "tire_force"])
+def test_vx_integrating_a_vibrating_ax_takes_its_measured_density_as_process_noise(config, model):
+    """A car without motor torques: both models integrate the measured ax into vx (the tire-force model's forces
+    come from ax), so its measured density is vx's process noise when it exceeds the configured one."""
+    from dataclasses import replace
+
+    from canest.estimation.reference_speed import TORQUES
+    from canest.pipeline import Pipeline
+    from canest.sim.simulate import simulate
+
+    torqueless = replace(config, signals={k: v for k, v in config.signals.items() if k not in TORQUES},
+                         estimator=replace(config.estimator, model=model, filter="ckf"))
+    sim = simulate(config, "sine", 80.0, 0.85, duration=4.0, seed=1, vibration=1.0)
+    pipeline = Pipeline(torqueless)
+    for frame in sim.frames:
+        pipeline.feed(frame)
+    estimator = pipeline.estimator
+    density = estimator.ax_noise.density
+    assert estimator.integrates_ax and density > estimator.Q[estimator.vx, estimator.vx] / estimator.dt
+    assert estimator._process_noise()[estimator.vx, estimator.vx] == pytest.approx(density * estimator.dt)

@@ -188,8 +188,8 @@ class Estimator:
 
     def _process_noise(self) -> np.ndarray:
         """Q of this tick's prediction: the configured one, vx's never below the measured ax noise's density where
-        vx integrates the measured ax (:data:`AX_NOISE_SPAN`); a binding whose model error scales with its state
-        adds to it."""
+        vx integrates the measured ax (:data:`AX_NOISE_SPAN`; the model's ``vx_noise_key``). A binding whose model
+        error scales with its state adds to this one."""
         density = self.ax_noise.density
         if not self.integrates_ax or density is None or density * self.dt <= self.Q[self.vx, self.vx]:
             return self.Q

@@ -23,19 +23,24 @@ samples, ``w`` the interpolation weights), it is the variance of the white
 noise that would scatter the spans' means as much, averaged over ``MEMORY``
 s (:attr:`MeasuredNoise.std`; times the sampling period, the noise's
 density, :attr:`MeasuredNoise.density`). Means, not single samples, because a
-filter averages a few samples: a noise correlated over 15 ms scatters a mean
-of three 10 ms samples 1.9 times as much as a white noise of the same
-variance, and it is that scatter the estimate carries.
+filter averages a few samples: the mean of three 10 ms samples of a noise
+correlated over 15 ms has 1.9 times the variance a white noise of the same
+variance gives it, and it is that scatter the estimate carries. A channel
+sampled more sparsely than two samples a span gets spans of ``PER_SPAN``
+sampling periods (a 20 Hz gyro: 75 ms).
 
 The estimator (:mod:`canest.estimation.core`) takes it four ways, never
 below the configured values, so a quiet sensor changes nothing: an
-accelerometer channel's R (ax, ay; the consistency test keeps the configured
-noise, as :mod:`canest.estimation.validity` requires); the published yaw
+accelerometer channel's R (ax, ay; the consistency and divergence tests keep
+the configured noise, as :mod:`canest.estimation.validity` requires; the
+published ``InnovationNis`` is the filter's, with the R it used); the published yaw
 rate's std, times the gyro's measured over configured noise
 (:meth:`canest.estimation.judge.StateJudge.widen`); vx's process noise where
 vx integrates the measured ax; and the reference speed's std while it
 integrates ax (:mod:`canest.estimation.reference_speed`), both from ax's
-density over 0.1 s spans (:data:`canest.estimation.core.AX_NOISE_SPAN`).
+density over 0.1 s spans (:data:`canest.estimation.core.AX_NOISE_SPAN`; the
+reference speed's std is its channel's own, so vx's consistency test sees
+it too).
 The gyro's noise is not its R: in a slide (the DLC on friction 0.35) the
 yaw rate's own fast changes read as noise, and svd-fckf, whose adaptive R
 may grow to ten times the R it is given, stopped following its gyro (yaw
@@ -66,13 +71,15 @@ from collections import deque
 SPAN = 0.03  # s of samples per mean
 MEMORY = 2.0  # s over which the squared residuals are averaged (exponentially)
 WARMUP = 0.25  # s of residuals before the noise is told (their mean so far)
+PER_SPAN = 1.5  # sampling periods per span at least: a 20 Hz channel's 30 ms spans would often hold no sample
+PERIOD_SAMPLES = 20  # samples over which the sampling period is averaged
 
 
 class MeasuredNoise:
     """One channel's noise standard deviation from its samples (module docstring)."""
 
     def __init__(self, span: float = SPAN):
-        self.span = span
+        self.span = span  # s per mean at least; a sparser channel's spans hold PER_SPAN of its sampling periods
         self.samples = deque()
         self.reset()
 
@@ -80,24 +87,30 @@ class MeasuredNoise:
         self.samples.clear()
         self.variance = None  # mean squared normalized residual, None before the first residual
         self.seen = 0.0  # s of residuals averaged, up to MEMORY
-        self.period = None  # s between samples, averaged as the residuals are
+        self.period = None  # s between samples, averaged over the last PERIOD_SAMPLES
 
     def add(self, t: float, value: float) -> None:
-        """One new sample taken at ``t`` (s); a sample older than the last starts over."""
-        if self.samples and t == self.samples[-1][0]:
+        """One new sample taken at ``t`` (s); a sample older than the last starts over, a non-finite one is left
+        out (the decoder rejects them; this keeps one from poisoning the mean for good)."""
+        if not (math.isfinite(t) and math.isfinite(value)) or (self.samples and t == self.samples[-1][0]):
             return
         if self.samples and t < self.samples[-1][0]:
             self.reset()
-        step = t - self.samples[-1][0] if self.samples else 0.0
+        if self.samples:
+            step = t - self.samples[-1][0]
+            self.period = step if self.period is None else self.period + (step - self.period) / PERIOD_SAMPLES
         self.samples.append((t, value))
-        start = t - 3.0 * self.span
-        if self.samples[0][0] > start + 0.5 * self.span:
+        if self.period is None:
+            return
+        span = max(self.span, PER_SPAN * self.period)
+        start = t - 3.0 * span
+        if self.samples[0][0] > start + 0.5 * span:
             return  # the first span is not yet covered
         while self.samples[0][0] < start:
             self.samples.popleft()
         spans = [[], [], []]
         for sample in self.samples:
-            spans[min(int((sample[0] - start) / self.span), 2)].append(sample)
+            spans[min(int((sample[0] - start) / span), 2)].append(sample)
         if not all(spans):
             return
         counts = [len(span) for span in spans]
@@ -108,11 +121,7 @@ class MeasuredNoise:
         white = 1.0 / counts[1] + w_first * w_first / counts[0] + w_last * w_last / counts[2]
         self.seen = min(self.seen + step, MEMORY)  # a mean over all until MEMORY s, then exponential
         square = residual * residual / white
-        if self.variance is None:
-            self.variance, self.period = square, step
-        else:
-            self.variance += step / self.seen * (square - self.variance)
-            self.period += step / self.seen * (step - self.period)
+        self.variance = square if self.variance is None else self.variance + step / self.seen * (square - self.variance)
 
     @property
     def std(self) -> float | None:

@@ -66,18 +66,20 @@ class TireForceEstimator(Estimator):
         return x0
 
     def _process_noise(self) -> np.ndarray:
-        """The configured Q plus the tire curve's error on the lateral forces: an axle's cornering stiffness off by
+        """The core's Q (with vx's from the measured ax where the forces come from ax) plus the tire curve's error on
+        the lateral forces: an axle's cornering stiffness off by
         ``e`` (the stiffness uncertainty) moves the steady-state forces of both its wheels by ``e F``, together (on
         a saturated tire the same term stands for the nominal friction's error). A force that relaxes by
         ``a = exp(-rho dt)`` per tick (``rho = V / sigma``) towards such a steady state keeps an error of ``e F``
         under a white noise of variance ``(1 - a^2) (e F)^2`` per tick: per axle the rank-one
         ``(1 - a^2) e^2 F F^T`` (left and right fully correlated, so their split is left to the configured,
         independent part). None at low speed, where the forces follow their load shares of ``m ay``."""
+        Q = super()._process_noise()
         if self.low_speed:
-            return self.Q
+            return Q
         x = self.filter.x
         rate = relaxation_rate(max(x[self.vx], MIN_WHEEL_SPEED), self.vehicle.tire.relaxation_length)
-        Q = self.Q.copy()
+        Q = Q.copy()
         for axle in tire_force.AXLE_FORCES:
             error = self.vehicle.cornering_stiffness_uncertainty * x[axle]
             Q[axle, axle] -= math.expm1(-2.0 * rate * self.dt) * np.outer(error, error)
