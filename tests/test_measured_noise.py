@@ -52,6 +52,13 @@ def test_nothing_is_said_before_a_warmup_of_samples_and_time_running_backwards_s
     assert noise.std is None and list(noise.samples) == [(0.1, 0.0)]
     noise.add(0.1, 1.0)  # a sample already seen adds nothing
     assert list(noise.samples) == [(0.1, 0.0)]
+    for ti in t:
+        noise.add(0.1 + ti, 0.01 * (-1) ** round(ti / 0.01))
+    period = noise.period
+    noise.add(60.0, 0.0)  # a gap of a minute: the sampling period is not a minute
+    assert noise.std is None and noise.period is None and list(noise.samples) == [(60.0, 0.0)]
+    noise.add(60.01, 0.0)
+    assert noise.period == pytest.approx(period)
 
 
 def test_a_sparse_channel_is_measured_too_and_a_non_finite_sample_is_left_out():

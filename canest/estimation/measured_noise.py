@@ -91,26 +91,27 @@ class MeasuredNoise:
 
     def add(self, t: float, value: float) -> None:
         """One new sample taken at ``t`` (s); a sample older than the last starts over, a non-finite one is left
-        out (the decoder rejects them; this keeps one from poisoning the mean for good)."""
+        out (the decoder rejects them; this keeps one from poisoning the mean for good). After a gap longer than
+        ``MEMORY`` it starts over too."""
         if not (math.isfinite(t) and math.isfinite(value)) or (self.samples and t == self.samples[-1][0]):
             return
-        if self.samples and t < self.samples[-1][0]:
-            self.reset()
+        if self.samples and not 0.0 < t - self.samples[-1][0] <= MEMORY:
+            self.reset()  # time ran backwards (a replay looped) or a gap: what was measured is another stretch's
         if self.samples:
             step = t - self.samples[-1][0]
             self.period = step if self.period is None else self.period + (step - self.period) / PERIOD_SAMPLES
         self.samples.append((t, value))
         if self.period is None:
             return
-        span = max(self.span, PER_SPAN * self.period)
-        start = t - 3.0 * span
-        if self.samples[0][0] > start + 0.5 * span:
+        width = max(self.span, PER_SPAN * self.period)
+        start = t - 3.0 * width
+        if self.samples[0][0] > start + 0.5 * width:
             return  # the first span is not yet covered
         while self.samples[0][0] < start:
             self.samples.popleft()
         spans = [[], [], []]
         for sample in self.samples:
-            spans[min(int((sample[0] - start) / span), 2)].append(sample)
+            spans[min(int((sample[0] - start) / width), 2)].append(sample)
         if not all(spans):
             return
         counts = [len(span) for span in spans]
