@@ -130,6 +130,8 @@ class Estimator:
         self.ax_noise = MeasuredNoise(AX_NOISE_SPAN)
         self.input_noise = {name: MeasuredNoise() for name in model.measurement_names
                             if name in ACCELEROMETERS + GYROS}
+        self.accelerometer_rows = [(row, self.input_noise[name]) for row, name in enumerate(model.measurement_names)
+                                   if name in ACCELEROMETERS]
         self.integrates_ax = getattr(model, "vx_noise_key", "vx") == "vx_from_ax"
         self.steering_zero = steering_zero(config)
         self.stiffness = (1.0, 1.0)  # factors on the configured cornering stiffnesses (:meth:`use_stiffness`)
@@ -323,9 +325,10 @@ class Estimator:
         """The channels as the filter takes them: an accelerometer channel's std never below its noise as its samples
         show it (:mod:`canest.estimation.measured_noise`); the consistency test keeps the configured one."""
         std = channels.std.copy()
-        for row, name in enumerate(self.model.measurement_names):
-            if name in ACCELEROMETERS and self.input_noise[name].std is not None:
-                std[row] = max(std[row], self.input_noise[name].std)
+        for row, noise in self.accelerometer_rows:
+            measured = noise.std
+            if measured is not None:
+                std[row] = max(std[row], measured)
         return ch.Channels(channels.mask, channels.z, std, channels.ages)
 
     def _gyro_noise(self, inputs: TickInputs) -> float:
