@@ -175,7 +175,7 @@ def test_the_tire_curves_error_moves_both_wheels_of_an_axle_together(config):
     estimator = pipeline.estimator
     forces = estimator.filter.x[3:7]
     assert np.all(np.abs(forces) > 500.0)  # the test's premise: in the bend
-    added = estimator._process_noise() - estimator.Q
+    added = estimator._process_noise(estimator.reference_speed.last_t + estimator.dt) - estimator.Q
     front, rear = added[3:5, 3:5], added[5:7, 5:7]
     assert np.count_nonzero(added) == 8  # the two 2x2 axle blocks only
     for block, pair in ((front, forces[:2]), (rear, forces[2:])):

@@ -73,7 +73,9 @@ def test_a_sparse_channel_is_measured_too_and_a_non_finite_sample_is_left_out():
 @pytest.mark.parametrize("model", ["single_track", "tire_force"])
 def test_vx_integrating_a_vibrating_ax_takes_its_measured_density_as_process_noise(config, model):
     """A car without motor torques: both models integrate the measured ax into vx (the tire-force model's forces
-    come from ax), so its measured density is vx's process noise when it exceeds the configured one."""
+    come from ax), so its measured density is vx's process noise when it exceeds the configured one; and while
+    the reference speed integrates that ax, enough to hold vx's variance at the walk every tick shares, which
+    the reference channel's std then leaves out (it is in the prior)."""
     from dataclasses import replace
 
     from canest.estimation.reference_speed import TORQUES
@@ -84,9 +86,18 @@ def test_vx_integrating_a_vibrating_ax_takes_its_measured_density_as_process_noi
                          estimator=replace(config.estimator, model=model, filter="ckf"))
     sim = simulate(config, "sine", 80.0, 0.85, duration=4.0, seed=1, vibration=1.0)
     pipeline = Pipeline(torqueless)
+    estimator, noise, density_floor, walk_floor = pipeline.estimator, [], [], []
+    vx, dt = estimator.vx, estimator.dt
     for frame in sim.frames:
-        pipeline.feed(frame)
-    estimator = pipeline.estimator
+        if pipeline.feed(frame) and estimator.ax_noise.density is not None:
+            t = estimator.reference_speed.last_t + dt
+            noise.append(estimator._process_noise(t)[vx, vx])
+            density_floor.append(max(estimator.Q[vx, vx], estimator.ax_noise.density * dt))
+            walk_floor.append(estimator._shared_walk(t) ** 2 - estimator.filter.P[vx, vx])
     density = estimator.ax_noise.density
-    assert estimator.integrates_ax and density > estimator.Q[estimator.vx, estimator.vx] / estimator.dt
-    assert estimator._process_noise()[estimator.vx, estimator.vx] == pytest.approx(density * estimator.dt)
+    assert estimator.integrates_ax and density > estimator.Q[vx, vx] / dt
+    np.testing.assert_allclose(noise, np.maximum(density_floor, walk_floor), rtol=1e-12)
+    binding = np.array(walk_floor) > np.array(density_floor)
+    assert 0 < binding.sum() < binding.size  # the walk binds between the wheels' anchors, not at them
+    later = estimator.reference_speed.last_t + 1.0  # nothing taken for a second: no walk shared
+    assert estimator._process_noise(later)[estimator.vx, estimator.vx] == pytest.approx(density * estimator.dt)

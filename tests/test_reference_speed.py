@@ -55,6 +55,10 @@ def test_an_integrated_ax_that_vibrates_grows_the_uncertainty_as_its_random_walk
         speed, std = ref.update(k * 0.01, 3.0, np.full(4, 60.0), np.full(4, 9.0 / RADIUS), np.full(4, 0.4),
                                 ax_density=0.06)
     assert std == pytest.approx(np.sqrt(ANCHORED_STD**2 + DRIFT**2 + 0.06 * 1.0))
+    assert ref.integration_std(1.0) == pytest.approx(np.sqrt(0.06 * 1.0))  # the walk every tick shared
+    assert ref.integration_std(1.01) == 0.0  # not updated at that tick: nothing taken there
+    ref.update(1.01, 0.0, np.full(4, 50.0), ROLLING, ROLLING, ax_density=0.06)  # the wheels anchor it again
+    assert ref.integration_std(1.01) == 0.0
 
 
 def test_a_wheel_out_of_step_with_the_imu_stops_the_anchoring_on_its_axle_even_without_torque():

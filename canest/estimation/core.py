@@ -188,16 +188,32 @@ class Estimator:
         self.low_speed = x0[self.vx] < self.est.min_speed
         return True
 
-    def _process_noise(self) -> np.ndarray:
-        """Q of this tick's prediction: the configured one, vx's never below the measured ax noise's density where
-        vx integrates the measured ax (:data:`AX_NOISE_SPAN`; the model's ``vx_noise_key``). A binding whose model
-        error scales with its state adds to this one."""
-        density = self.ax_noise.density
-        if not self.integrates_ax or density is None or density * self.dt <= self.Q[self.vx, self.vx]:
+    def _process_noise(self, t: float) -> np.ndarray:
+        """Q of the prediction at tick ``t``: the configured one; where vx integrates the measured ax (the model's
+        ``vx_noise_key``), vx's never below the measured ax noise's density (:data:`AX_NOISE_SPAN`) and enough to
+        bring vx's variance up to the random walk of the reference speed the filter took since the wheels last
+        anchored it (:meth:`_shared_walk`): its prediction integrates that very ax, so the walk is its error too,
+        yet every tick's reference taken as a new measurement had shrunk its variance below it, and an anchor
+        could not pull it back (ckf on a vibrating IMU: 0.12 m/s off at the anchors, where the reference was
+        0.035 off, with a std of 0.05). The reference channel's std then leaves the walk out (:meth:`_derived`):
+        the innovation ``reference - prior`` cancels it. Only ever added to the diagonal: Q stays positive
+        semidefinite. A binding whose model error scales with its state adds to this one."""
+        if not self.integrates_ax:
             return self.Q
         Q = self.Q.copy()
-        Q[self.vx, self.vx] = density * self.dt
+        density = self.ax_noise.density
+        if density is not None:
+            Q[self.vx, self.vx] = max(Q[self.vx, self.vx], density * self.dt)
+        Q[self.vx, self.vx] = max(Q[self.vx, self.vx], self._shared_walk(t) ** 2 - self.filter.P[self.vx, self.vx])
         return Q
+
+    def _shared_walk(self, t: float) -> float:
+        """The reference speed's random walk (m/s) as the filter took it on the tick before ``t`` (0 if it took
+        none there: ax or the wheels missing, stale or saturated, a gap)."""
+        previous = self.reference_speed.last_t
+        if previous is None or not 0.0 < t - previous <= 1.5 * self.dt:
+            return 0.0
+        return self.reference_speed.integration_std(previous)
 
     def _road_wheel_angle(self, inputs: TickInputs) -> float:
         return self.steering_zero.angle(inputs) / self.vehicle.steering_ratio
@@ -235,7 +251,8 @@ class Estimator:
 
         Here ``vx_wheel``, for models that measure it: the reference speed (wheels while they roll
         freely, else integrated ax), so vx never follows spinning or locked wheels; the plain
-        wheel mean where ax is missing."""
+        wheel mean where ax is missing. Its std less the ax noise's walk where the model integrates ax (the
+        prior holds it, :meth:`_process_noise`)."""
         if "vx_wheel" not in self.model.measurement_names:
             return {}
         reference = self._reference_speed(inputs, t)
@@ -243,6 +260,8 @@ class Estimator:
             return {}
         age = sum(inputs.ages[w] for w in WHEEL_SPEEDS) / len(WHEEL_SPEEDS)
         speed, std = reference or (inputs.wheel_speed(self.vehicle.wheel_radius), self.est.measurement_noise["vx_wheel"])
+        if reference and self.integrates_ax:  # the walk is in the prior (:meth:`_process_noise`), not beside it
+            std = math.sqrt(max(std**2 - self.reference_speed.integration_std(t) ** 2, 0.0))
         return {"vx_wheel": (speed, max(std, self.est.measurement_noise["vx_wheel"]), age)}
 
     def _channels(self, inputs: TickInputs, t: float, lateral_ok: bool) -> ch.Channels:
@@ -286,7 +305,7 @@ class Estimator:
         self._choose_mode()
         u = self._control(inputs, t)
         started = time.thread_time() if self.step_times is not None else 0.0
-        self.filter.predict(self.transitions[self.low_speed], u, self.dt, self._process_noise())
+        self.filter.predict(self.transitions[self.low_speed], u, self.dt, self._process_noise(t))
         lateral_ok = not self.low_speed and inputs.has("steering_wheel_angle", "ay")
         channels = self._channels(inputs, t, lateral_ok)
         self.judge.record(channels, u, self.filter.x.copy(), self.filter.covariance.copy(), self.stale_before)
@@ -362,7 +381,8 @@ class Estimator:
         drift = self.judge.drift(inputs, vx, beta, math.hypot(std[self.beta], beta_model_std),
                                  reference.last_t != t or reference.anchored_at == t)
         carried = self.covariance_has_tire_error and not self.low_speed  # the model's Q has the tire error
-        std = self.judge.widen(std, index, ratios, 0.0 if carried else beta_model_std, drift, self._gyro_noise(inputs))
+        std = self.judge.widen(std, index, ratios, 0.0 if carried else beta_model_std, drift, self._gyro_noise(inputs),
+                               reference.integration_std(t))
         values = {
             "vx": vx, "vy": vx * math.tan(beta), "beta": beta, "yaw_rate": x[self.yaw],
             "vx_std": std[self.vx], "vy_std": math.hypot(vx * std[self.beta] / math.cos(beta) ** 2,

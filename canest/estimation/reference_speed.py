@@ -32,6 +32,11 @@ longitudinal acceleration in between:
   ``sqrt(q T)`` after ``T`` s (:mod:`canest.estimation.measured_noise`). An
   IMU vibrating as the simulator's ``vibration 1`` integrates to 0.24
   m/s/sqrt(s): 0.08 m/s within 0.1 s, where ``DRIFT`` alone had said 0.01.
+  A filter takes the integrating reference every tick as a new measurement,
+  yet its random walk is one error shared by all of them
+  (:meth:`ReferenceSpeed.integration_std`): the estimator's published vx std
+  is never below it, and a model that integrates the same ax holds it in its
+  prior instead of in this channel's std (:mod:`canest.estimation.core`).
 
 Measured on the simulator's launch on friction 0.35 (README "Tire forces and
 road friction"): the reference stays within 0.1 m/s of the true speed while
@@ -143,6 +148,14 @@ class ReferenceSpeed:
     def _std(self, t: float) -> float:
         integrated = t - self.anchored_at
         return math.sqrt(self.anchor_std**2 + (DRIFT * integrated) ** 2 + self.ax_density * integrated)
+
+    def integration_std(self, t: float) -> float:
+        """The std (m/s) of the ax noise's random walk in the speed at tick ``t``, ``sqrt(q T)`` over the ``T`` s
+        since the wheels last anchored it (0 while they anchor it, or without an update at ``t``): what a filter
+        that takes this reference every tick shares with all of them, and is never more certain than."""
+        if self.last_t != t or self.anchored_at in (None, t):
+            return 0.0
+        return math.sqrt(self.ax_density * (t - self.anchored_at))
 
     def _anchor(self, t: float, speed: float, std: float) -> None:
         self.speed, self.anchored_at, self.anchor_std = speed, t, std

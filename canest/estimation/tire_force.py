@@ -65,7 +65,7 @@ class TireForceEstimator(Estimator):
         x0[tire_force.FY] = self.vehicle.mass * ay * loads / loads.sum()
         return x0
 
-    def _process_noise(self) -> np.ndarray:
+    def _process_noise(self, t: float) -> np.ndarray:
         """The core's Q (with vx's from the measured ax where the forces come from ax) plus the tire curve's error on
         the lateral forces: an axle's cornering stiffness off by
         ``e`` (the stiffness uncertainty) moves the steady-state forces of both its wheels by ``e F``, together (on
@@ -74,7 +74,7 @@ class TireForceEstimator(Estimator):
         under a white noise of variance ``(1 - a^2) (e F)^2`` per tick: per axle the rank-one
         ``(1 - a^2) e^2 F F^T`` (left and right fully correlated, so their split is left to the configured,
         independent part). None at low speed, where the forces follow their load shares of ``m ay``."""
-        Q = super()._process_noise()
+        Q = super()._process_noise(t)
         if self.low_speed:
             return Q
         x = self.filter.x

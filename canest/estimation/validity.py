@@ -50,7 +50,13 @@ Published standard deviations get these terms beyond the filter's covariance:
 - the sideslip is never published more certain than its remembered mismatch
   with the kinematic sideslip (:class:`KinematicCheck`), and vx's std grows
   by ``|r|`` times the lateral velocity's std while the wheels do not measure
-  vx (:class:`LateralDrift`).
+  vx (:class:`LateralDrift`);
+- vx is never published more certain than the random walk the ax noise put
+  into the reference speed since the wheels last anchored it: a filter takes
+  that reference every tick as a new measurement, but its walk is one error
+  they all share (on a vibrating IMU ckf's vx NEES was 4.6, its error at the
+  anchors 0.12 m/s where the reference's was 0.035;
+  :meth:`canest.estimation.reference_speed.ReferenceSpeed.integration_std`).
 
 Sideslip also needs the model inside its valid regime. A model with fixed
 tire friction (the single-track model's linear tires, the tire-force
