@@ -200,3 +200,18 @@ def test_a_wheel_speed_at_its_dbc_limit_is_saturated_not_a_speed(tmp_path):
     assert len(beyond) > 50
     assert all(not e.valid["vx"] and e.causes["vx"] == "saturated" for e, _ in beyond)
     assert all(abs(e.values["vx"] - v) < 1.0 for e, v in beyond)  # ax integrated, not the limit
+
+
+def test_vx_std_takes_the_reference_speeds_walk_apart_or_as_a_floor(config):
+    """A model integrating ax holds the reference's walk in its prior and leaves it out of the reference channel:
+    its covariance after the update is the error beside the walk, which the published std adds in quadrature.
+    Another model took the walk inside the reference's std: its vx is never published below it."""
+    judge = StateJudge(SingleTrackModel(config.vehicle), config.vehicle, 0.01)
+    index = {"yaw_rate": 2, "vx": 1, "beta": 0}
+    ratios = {"yaw_rate": 1.0, "vx": 1.0, "beta": 1.0}
+    std = np.array([0.01, 0.05, 0.001])
+    apart = judge.widen(std, index, ratios, 0.0, walk=0.12, walk_apart=True)
+    floor = judge.widen(std, index, ratios, 0.0, walk=0.12)
+    assert apart[1] == pytest.approx(0.13) and floor[1] == pytest.approx(0.12)
+    assert judge.widen(std, index, ratios, 0.0, walk=0.01)[1] == pytest.approx(0.05)  # a small walk: the filter's
+    np.testing.assert_array_equal(apart[[0, 2]], floor[[0, 2]])

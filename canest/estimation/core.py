@@ -196,8 +196,10 @@ class Estimator:
         yet every tick's reference taken as a new measurement had shrunk its variance below it, and an anchor
         could not pull it back (ckf on a vibrating IMU: 0.12 m/s off at the anchors, where the reference was
         0.035 off, with a std of 0.05). The reference channel's std then leaves the walk out (:meth:`_derived`):
-        the innovation ``reference - prior`` cancels it. Only ever added to the diagonal: Q stays positive
-        semidefinite. A binding whose model error scales with its state adds to this one."""
+        the innovation ``reference - prior`` cancels it, and the posterior keeps it whole, so the covariance
+        after the update holds the error beside the walk, and the published std adds the walk in quadrature
+        (:meth:`StateJudge.widen`). Only ever added to the diagonal: Q stays positive semidefinite. A binding
+        whose model error scales with its state adds to this one."""
         if not self.integrates_ax:
             return self.Q
         Q = self.Q.copy()
@@ -382,7 +384,7 @@ class Estimator:
                                  reference.last_t != t or reference.anchored_at == t)
         carried = self.covariance_has_tire_error and not self.low_speed  # the model's Q has the tire error
         std = self.judge.widen(std, index, ratios, 0.0 if carried else beta_model_std, drift, self._gyro_noise(inputs),
-                               reference.integration_std(t))
+                               reference.integration_std(t), self.integrates_ax)
         values = {
             "vx": vx, "vy": vx * math.tan(beta), "beta": beta, "yaw_rate": x[self.yaw],
             "vx_std": std[self.vx], "vy_std": math.hypot(vx * std[self.beta] / math.cos(beta) ** 2,

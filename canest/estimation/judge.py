@@ -105,17 +105,19 @@ class StateJudge:
         return inputs.values["ay"] - ay_offset, inputs.values["yaw_rate"] - yaw_offset
 
     def widen(self, std: np.ndarray, index: dict, ratios: dict, beta_model_std: float,
-              drift: float = 0.0, gyro_noise: float = 1.0, vx_shared: float = 0.0) -> np.ndarray:
+              drift: float = 0.0, gyro_noise: float = 1.0, walk: float = 0.0, walk_apart: bool = False) -> np.ndarray:
         """The published std: each state's by its channels' consistency, the yaw rate's also by its gyro's noise as
         measured over configured (``gyro_noise``, :mod:`canest.estimation.measured_noise`; never narrowed by it),
-        vx with its lateral drift and never below the error the reference speed shares with every tick it was
-        taken (``vx_shared``, :meth:`canest.estimation.reference_speed.ReferenceSpeed.integration_std`),
-        sideslip with its model error (``beta_model_std``, :meth:`sideslip_model_std`), and never below its last
-        mismatch with the kinematic sideslip change."""
+        vx with its lateral drift and the reference speed's random walk, the error every tick it was updated
+        shares (``walk``, :meth:`canest.estimation.reference_speed.ReferenceSpeed.integration_std`): in
+        quadrature where the covariance holds only the error beside it (``walk_apart``: a model integrating ax,
+        whose reference channel leaves the walk out), else never below it; sideslip with its model error
+        (``beta_model_std``, :meth:`sideslip_model_std`), and never below its last mismatch with the kinematic
+        sideslip change."""
         std = std.copy()
         std[index["yaw_rate"]] *= validity.inflation(ratios["yaw_rate"]) * max(gyro_noise, 1.0)
-        std[index["vx"]] = max(math.hypot(std[index["vx"]] * validity.inflation(ratios["vx"]), drift,
-                                          self.lateral_drift.spread), vx_shared)
+        vx = math.hypot(std[index["vx"]] * validity.inflation(ratios["vx"]), drift, self.lateral_drift.spread)
+        std[index["vx"]] = math.hypot(vx, walk) if walk_apart else max(vx, walk)
         std[index["beta"]] = max(math.hypot(std[index["beta"]] * validity.inflation(ratios["beta"]), beta_model_std),
                                  self.kinematic.mismatch)
         return std

@@ -35,8 +35,8 @@ longitudinal acceleration in between:
   A filter takes the integrating reference every tick as a new measurement,
   yet its random walk is one error shared by all of them
   (:meth:`ReferenceSpeed.integration_std`): the estimator's published vx std
-  is never below it, and a model that integrates the same ax holds it in its
-  prior instead of in this channel's std (:mod:`canest.estimation.core`).
+  carries it, and a model that integrates the same ax holds it in its prior
+  instead of in this channel's std (:mod:`canest.estimation.core`).
 
 Measured on the simulator's launch on friction 0.35 (README "Tire forces and
 road friction"): the reference stays within 0.1 m/s of the true speed while
