@@ -210,8 +210,8 @@ class Estimator:
         return Q
 
     def _shared_walk(self, t: float) -> float:
-        """The reference speed's random walk (m/s) as the filter took it on the tick before ``t`` (0 if it took
-        none there: ax or the wheels missing, stale or saturated, a gap)."""
+        """The reference speed's random walk (m/s) at its update on the tick before ``t`` (0 without one there: ax
+        or the wheels missing, stale or saturated, a gap)."""
         previous = self.reference_speed.last_t
         if previous is None or not 0.0 < t - previous <= 1.5 * self.dt:
             return 0.0

@@ -39,8 +39,9 @@ rate's std, times the gyro's measured over configured noise
 vx integrates the measured ax; and the reference speed's std while it
 integrates ax (:mod:`canest.estimation.reference_speed`), both from ax's
 density over 0.1 s spans (:data:`canest.estimation.core.AX_NOISE_SPAN`; the
-reference speed's std is its channel's own, so vx's consistency test sees
-it too).
+random walk it puts into the reference speed is in that channel's std or,
+where the model integrates ax, in the filter's prior: vx's consistency test
+sees it either way).
 The gyro's noise is not its R: in a slide (the DLC on friction 0.35) the
 yaw rate's own fast changes read as noise, and svd-fckf, whose adaptive R
 may grow to ten times the R it is given, stopped following its gyro (yaw
