@@ -71,7 +71,7 @@ def test_local_cluster_matches_sequential_replay_and_resumes(config, fleet, tmp_
         expected = replayed(config, log, tmp_path)
         np.testing.assert_array_equal(result["t"], expected["t"])
         np.testing.assert_array_equal(result["yaw_rate"], expected["yaw_rate"])
-        assert row["beta_rmse_deg"] < 1.5 and 0.9 < row["valid_share"] <= 1.0
+        assert row["beta_rmse_deg"] < 1.5 and 0.75 < row["valid_share"] <= 1.0  # 3 s: vx initializing ~0.5 s
     assert (out / "fleet_summary.csv").read_text().count("\n") == LOGS + 2
     assert not list(out.rglob("*.tmp")), "the broken log's task left its partial CSV behind"
     assert not list((out / "south" / "broken.log").rglob("*.*")), "a failed task leaves nothing in its folder"

@@ -79,7 +79,8 @@ def test_ford_log_runs_normal_and_matches_the_cars_own_speed_and_yaw_rate(ford_r
     used = moving & normal
     assert math.sqrt(np.mean((vx[used] - reference_speed[used]) ** 2)) < 0.1
     assert math.degrees(math.sqrt(np.mean((yaw_rate[used] - np.interp(t, yaw_t, yaw)[used]) ** 2))) < 0.1
-    assert np.mean([e.valid.get("vx", False) and e.valid.get("yaw_rate", False) for e in estimates]) >= 0.99
+    settled = [e for e in estimates if e.t - estimates[0].t > 1.0]  # vx waits ~0.5 s for ax's noise to be measured
+    assert np.mean([e.valid.get("vx", False) and e.valid.get("yaw_rate", False) for e in settled]) >= 0.99
 
 
 def test_ford_steering_zero_is_learned_and_sideslip_stays_small(ford_run):
@@ -119,7 +120,7 @@ def test_absolute_steering_flagged_faulty_is_rejected_by_cause(tmp_path, drive):
     assert summary["resets"] == 0
     assert not any(e.valid.get("beta", False) for e in estimates)
     assert Counter(e.mode for e in estimates[10:]) == {"degraded": len(estimates) - 10}  # no steering, no lateral model
-    assert np.mean([e.valid.get("vx", False) for e in estimates]) >= 0.99
+    assert np.mean([e.valid.get("vx", False) for e in estimates if e.t - estimates[0].t > 1.0]) >= 0.99
 
 
 def test_check_names_where_each_cycle_time_comes_from(tmp_path):

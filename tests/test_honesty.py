@@ -7,6 +7,7 @@ filters and states still outside the issue's targets).
 """
 import sys
 
+import numpy as np
 import pytest
 
 from canest.config import load_config
@@ -96,6 +97,26 @@ def test_vx_integrating_a_vibrating_ax_is_never_more_certain_than_its_shared_ran
     assert score.nees <= 2.0 and score.cov2 >= 0.90 and score.vbw <= 0.001, score
 
 
+def test_vx_is_not_valid_on_a_walk_whose_noise_is_not_yet_measured(tmp_path):
+    """ax's noise is measured from its samples after about half a second: until then the reference speed
+    integrated a vibrating ax with no random walk in its std, and ckf published vx 0.40 m/s off with a std of
+    0.029, valid, at 0.5 s of the small vibrating grid's sine; and when the wheels anchored it on the next tick
+    the walk, now measurable, had not reached its variance (0.41 off, std 0.033). vx is "initializing" while the
+    reference speed takes an ax of unknown noise, and the walk is taken at the density as measured now: on this
+    drive at most 4.1 std off then, was 14 (on the first ticks after the density is known, read from a quarter
+    second of residuals, other seeds are still 5-8 std off, was 6-14)."""
+    from canest.apps.compare import with_filter
+    from canest.apps.evaluate import read_table
+    from canest.apps.replay import replay
+    config = load_config(CONFIG)
+    log, truth_csv = honesty.drive(config, honesty.Case("sine", 80.0, 0.85, 0, duration=1.5, vibration=1.0), tmp_path)
+    truth, estimates = read_table(truth_csv), []
+    replay(with_filter(config, "ckf"), log, progress=False, on_estimate=estimates.append)
+    valid = [e for e in estimates if e.causes["vx"] == "valid"]
+    errors = [abs(e.values["vx"] - np.interp(e.t, truth["t"], truth["vx"])) / e.values["vx_std"] for e in valid]
+    assert len(valid) > 0.5 * len(estimates) and max(errors) < 5.0, max(errors)
+
+
 def test_a_drawn_car_grid_drives_one_car_per_seed_as_wrong_as_the_config_admits():
     """``--car drawn``: the drives are cached apart from the exact car's, and each seed's is its own car."""
     vehicle = load_config(CONFIG).vehicle
@@ -116,10 +137,11 @@ def test_the_sideslip_std_carries_a_stiffness_error_near_the_tire_limit(tmp_path
     """On cars drawn as wrong as their config admits, jckf's and dckf's sideslip was 3-4 and 2.6 deg off with
     stds of 0.8-1.2 and 1.06, valid (23 and 22 % of these drives' valid ticks): the stiffness term was the linear
     tire's. It is the estimate's rear slip angle times the stiffness's uncertainty now; dckf's is still wrong on
-    1.6 % of this drive's valid ticks (its friction estimate takes part of the stiffness error: open)."""
+    0.5 % of this drive's valid ticks, valid on 28 % (its friction estimate takes part of the stiffness error:
+    open; 1.6 % of 42 % before the wheels were held to ax's mean over their window)."""
     result = honesty.run_case(CONFIG, [name], case, tmp_path)
     score = honesty.summarize("beta", result["sums"][name]["beta"])
-    assert score.valid > 0.3 and score.vbw <= bound, score
+    assert score.valid > 0.2 and score.vbw <= bound, score
 
 
 def test_the_lateral_forces_std_is_the_tire_curves_error_not_a_random_walks(tmp_path):

@@ -51,7 +51,7 @@ from canest.estimation.gyro_hold import GyroHold
 from canest.estimation.inputs import WHEEL_SPEEDS, TickInputs
 from canest.estimation.judge import DIVERGENCE_NIS, StateJudge
 from canest.estimation.measured_noise import MeasuredNoise
-from canest.estimation.reference_speed import ReferenceSpeed, tick_usage
+from canest.estimation.reference_speed import TORQUES, ReferenceSpeed, tick_usage
 from canest.estimation.steering_zero import steering_zero
 from canest.filters import Transition, make_filter
 from canest.filters.base import central_difference_jacobian
@@ -211,11 +211,13 @@ class Estimator:
 
     def _shared_walk(self, t: float) -> float:
         """The reference speed's random walk (m/s) at its update on the tick before ``t`` (0 without one there: ax
-        or the wheels missing, stale or saturated, a gap)."""
+        or the wheels missing, stale or saturated, a gap), at ax's noise density as measured now: in the first
+        half second nothing is measured yet, and a vibrating ax had walked the reference 0.4 m/s off unseen
+        (the small vibrating grid's ckf: vx 0.41 m/s off with a std of 0.033 when the wheels anchored it)."""
         previous = self.reference_speed.last_t
         if previous is None or not 0.0 < t - previous <= 1.5 * self.dt:
             return 0.0
-        return self.reference_speed.integration_std(previous)
+        return self.reference_speed.integration_std(previous, self.ax_noise.density or 0.0)
 
     def _road_wheel_angle(self, inputs: TickInputs) -> float:
         return self.steering_zero.angle(inputs) / self.vehicle.steering_ratio
@@ -246,7 +248,7 @@ class Estimator:
         delta = self._road_wheel_angle(inputs)
         front_excess = vx * (math.cos(delta) - 1.0) + (vy + self.vehicle.cg_to_front * yaw_rate) * math.sin(delta)
         return self.reference_speed.update(t, acceleration, speeds, accelerations, usage, front_excess,
-                                           self.ax_noise.density or 0.0)
+                                           self.ax_noise.density or 0.0, inputs.has(*TORQUES))
 
     def _derived(self, inputs: TickInputs, t: float, lateral_ok: bool) -> dict:
         """Channels computed from the inputs this tick: name -> (value, standard deviation, age).
@@ -394,7 +396,8 @@ class Estimator:
         lateral = {"low_speed": mode == "low_speed", "after_reset": mode == "degraded" and t < self.suspect_until,
                    "zero_learned": self.steering_zero.learned, "lateral_ok": lateral_ok, "beta": beta, "vx": vx,
                    "delta": self._road_wheel_angle(inputs)}
-        causes = self.judge.causes(inputs, ratios, std[self.vx], lateral, t, drift)
+        walk_unknown = self.ax_noise.density is None and reference.last_t == t
+        causes = self.judge.causes(inputs, ratios, std[self.vx], lateral, t, drift, walk_unknown)
         valid = {name: causes[name] == "valid" for name in causes}
         valid["vy"] = valid["beta"] and valid["vx"]
         self._extra_values(values, valid, causes, std, inputs, ratios)

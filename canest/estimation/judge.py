@@ -122,13 +122,15 @@ class StateJudge:
                                  self.kinematic.mismatch)
         return std
 
-    def causes(self, inputs, ratios: dict, vx_std: float, lateral: dict, t: float, drift: float = 0.0) -> dict:
+    def causes(self, inputs, ratios: dict, vx_std: float, lateral: dict, t: float, drift: float = 0.0,
+               walk_unknown: bool = False) -> dict:
         """Cause per state (held for ``validity.HOLD``); ``lateral`` describes the sideslip's situation, ``drift``
-        is :meth:`drift`."""
+        is :meth:`drift`, ``walk_unknown``: the reference speed was updated with an ax whose noise is not measured
+        yet."""
         causes = {
             "yaw_rate": validity.judge(any(inputs.has(n) for n in self.gyros), inputs.saturated("yaw_rate"),
                                        ratios["yaw_rate"]),
-            "vx": self._vx_cause(inputs, ratios["vx"], vx_std, drift),
+            "vx": self._vx_cause(inputs, ratios["vx"], vx_std, drift, walk_unknown),
             "beta": self._lateral_cause(inputs, ratios["beta"], **lateral),
         }
         causes = {state: self.holds.apply(state, cause, t) for state, cause in causes.items()}
@@ -136,13 +138,19 @@ class StateJudge:
         return causes
 
     @staticmethod
-    def _vx_cause(inputs, ratio: float, vx_std: float, drift: float) -> str:
+    def _vx_cause(inputs, ratio: float, vx_std: float, drift: float, walk_unknown: bool) -> str:
+        """As every measured state's, then "model_regime" for a drift beyond ``DRIFT_LIMIT``, "uncertain" for a std
+        beyond ``VX_VALID_STD``, and "initializing" while the reference speed takes an ax whose noise is not yet
+        measured (the first half second: the random walk of its integration, which a vibrating IMU makes 0.4
+        m/s, is unknown, and an anchor does not bring back a filter that took it)."""
         cause = validity.judge(inputs.has(*WHEEL_SPEEDS) or inputs.has("ax"),
                                any(inputs.saturated(w) for w in WHEEL_SPEEDS), ratio)
         if cause == "valid" and drift > validity.DRIFT_LIMIT:
             return "model_regime"
         if cause == "valid" and vx_std > validity.VX_VALID_STD:
             return "uncertain"
+        if cause == "valid" and walk_unknown:
+            return "initializing"
         return cause
 
     def _lateral_cause(self, inputs, ratio: float, low_speed: bool, after_reset: bool, zero_learned: bool,
