@@ -39,6 +39,19 @@ def test_spinning_wheels_are_not_followed_and_the_uncertainty_grows():
     assert std == pytest.approx(np.hypot(ANCHORED_STD, DRIFT * 1.0))
 
 
+def test_an_estimate_off_the_reference_is_off_by_what_the_reference_s_std_does_not_explain():
+    ref = reference()
+    ref.update(0.0, 0.0, np.full(4, 50.0), ROLLING, ROLLING)
+    for k in range(1, 101):  # a second of spinning wheels: the reference integrates ax
+        speed, std = ref.update(k * 0.01, 3.0, np.full(4, 50.0 + 0.3 * k), np.full(4, 30.0), np.full(4, 0.4))
+    assert std > 2 * ANCHORED_STD
+    t = ref.last_t
+    assert ref.disagreement(t, speed + 0.5 * std) == 0.0  # within its std: the estimate's own says enough
+    assert ref.disagreement(t, speed - 3.0 * std) == pytest.approx(2.0 * std)
+    assert ref.disagreement(t, speed - 3.0 * std, beside=std) == pytest.approx((3.0 - np.sqrt(2.0)) * std)
+    assert ref.disagreement(t + 0.01, speed + 9.0) == 0.0  # no update at that tick: nothing to compare with
+
+
 def rolled(seconds=PAIR_SETTLE, drive_front_share=1.0):
     """A reference after ``seconds`` of 10 ms ticks of free rolling at 50 rad/s: its pairs have settled."""
     ref = ReferenceSpeed(RADIUS, STIFFNESS, ANCHORED_STD, drive_front_share)

@@ -215,3 +215,17 @@ def test_vx_std_takes_the_reference_speeds_walk_apart_or_as_a_floor(config):
     assert apart[1] == pytest.approx(0.13) and floor[1] == pytest.approx(0.12)
     assert judge.widen(std, index, ratios, 0.0, walk=0.01)[1] == pytest.approx(0.05)  # a small walk: the filter's
     np.testing.assert_array_equal(apart[[0, 2]], floor[[0, 2]])
+
+
+def test_vx_std_is_never_below_its_remembered_distance_from_the_reference_speed(config):
+    """A floor, not a term: the distance from the reference beyond its std bounds vx's error from below; it is
+    remembered over validity.HOLD s, so a distance that alternates tick by tick does not flicker vx's bit."""
+    judge = StateJudge(SingleTrackModel(config.vehicle), config.vehicle, 0.01)
+    index = {"yaw_rate": 2, "vx": 1, "beta": 0}
+    ratios = {"yaw_rate": 1.0, "vx": 1.0, "beta": 1.0}
+    std = np.array([0.01, 0.05, 0.001])
+    assert judge.widen(std, index, ratios, 0.0, reference_gap=0.03)[1] == pytest.approx(0.05)  # the filter's
+    assert judge.widen(std, index, ratios, 0.0, reference_gap=0.6)[1] == pytest.approx(0.6)
+    assert judge.widen(std, index, ratios, 0.0)[1] == pytest.approx(0.6 * math.exp(-0.01 / validity.HOLD))
+    judge.reset()
+    assert judge.widen(std, index, ratios, 0.0)[1] == pytest.approx(0.05)

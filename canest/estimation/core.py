@@ -385,8 +385,11 @@ class Estimator:
         drift = self.judge.drift(inputs, vx, beta, math.hypot(std[self.beta], beta_model_std),
                                  reference.last_t != t or reference.anchored_at == t)
         carried = self.covariance_has_tire_error and not self.low_speed  # the model's Q has the tire error
+        # vx driven by the wheels' forces can leave the reference; one integrating ax shares its integration (ax and
+        # r vy alike), and their difference tells nothing
+        gap = 0.0 if self.integrates_ax else reference.disagreement(t, vx, self.judge.lateral_std(drift))
         std = self.judge.widen(std, index, ratios, 0.0 if carried else beta_model_std, drift, self._gyro_noise(inputs),
-                               reference.integration_std(t), self.integrates_ax)
+                               reference.integration_std(t), self.integrates_ax, gap)
         values = {
             "vx": vx, "vy": vx * math.tan(beta), "beta": beta, "yaw_rate": x[self.yaw],
             "vx_std": std[self.vx], "vy_std": math.hypot(vx * std[self.beta] / math.cos(beta) ** 2,

@@ -33,6 +33,8 @@ class StateJudge:
         self.kinematic = validity.KinematicCheck(dt)
         self.lateral_drift = validity.LateralDrift(dt)
         self.sideslip_known = False  # the sideslip was valid on the last tick
+        self.reference_gap = 0.0  # m/s, vx's remembered distance from the reference speed (:meth:`widen`)
+        self.gap_decay = math.exp(-dt / validity.HOLD)
         self.kinematic_offsets = (0.0, 0.0)  # ay, yaw rate (:meth:`use_kinematic_offsets`)
         self.gyros = [n for n in validity.OBSERVED_BY["yaw_rate"] if n in model.measurement_names]  # the measured ones
         self.linear_tires = getattr(model, "linear_tires", False)
@@ -47,6 +49,7 @@ class StateJudge:
 
     def reset(self) -> None:
         self.consistency.reset()
+        self.reference_gap = 0.0
         self.kinematic.reset()
         if self.regime is not None:
             self.regime.reset()
@@ -94,6 +97,12 @@ class StateJudge:
         return self.lateral_drift.update(ay, yaw_rate, vx, beta, vx_measured, self.sideslip_known,
                                          abs(vx) * beta_std / math.cos(beta) ** 2)
 
+    def lateral_std(self, drift: float) -> float:
+        """The vx error (m/s) a lateral velocity the model misses may have caused since the wheels last measured vx:
+        :meth:`drift`'s bound and the sideslip std's integral (:attr:`validity.LateralDrift.spread`) in
+        quadrature. The reference speed integrated the same ``r vy`` over that time."""
+        return math.hypot(drift, self.lateral_drift.spread)
+
     def use_kinematic_offsets(self, ay: float, yaw_rate: float) -> None:
         """Offsets still in the inputs' ay and yaw rate that the kinematic identity ``ay - c = v (r - b) + dvy/dt``
         has learned (the online calibration's, not applied to the inputs): the kinematic checks take them out."""
@@ -105,19 +114,23 @@ class StateJudge:
         return inputs.values["ay"] - ay_offset, inputs.values["yaw_rate"] - yaw_offset
 
     def widen(self, std: np.ndarray, index: dict, ratios: dict, beta_model_std: float,
-              drift: float = 0.0, gyro_noise: float = 1.0, walk: float = 0.0, walk_apart: bool = False) -> np.ndarray:
+              drift: float = 0.0, gyro_noise: float = 1.0, walk: float = 0.0, walk_apart: bool = False,
+              reference_gap: float = 0.0) -> np.ndarray:
         """The published std: each state's by its channels' consistency, the yaw rate's also by its gyro's noise as
         measured over configured (``gyro_noise``, :mod:`canest.estimation.measured_noise`; never narrowed by it),
         vx with its lateral drift and the reference speed's random walk, the error every tick it was updated
         shares (``walk``, :meth:`canest.estimation.reference_speed.ReferenceSpeed.integration_std`): in
         quadrature where the covariance holds only the error beside it (``walk_apart``: a model integrating ax,
-        whose reference channel leaves the walk out), else never below it; sideslip with its model error
-        (``beta_model_std``, :meth:`sideslip_model_std`), and never below its last mismatch with the kinematic
-        sideslip change."""
+        whose reference channel leaves the walk out), else never below it, and never below ``reference_gap`` (its
+        distance from the reference beyond the reference's std, ``ReferenceSpeed.disagreement``), remembered over
+        ``validity.HOLD`` s (it alternates tick by tick while vx and the reference cross: vx's bit flickered
+        between valid and uncertain); sideslip with its model error (``beta_model_std``,
+        :meth:`sideslip_model_std`), and never below its last mismatch with the kinematic sideslip change."""
         std = std.copy()
         std[index["yaw_rate"]] *= validity.inflation(ratios["yaw_rate"]) * max(gyro_noise, 1.0)
-        vx = math.hypot(std[index["vx"]] * validity.inflation(ratios["vx"]), drift, self.lateral_drift.spread)
-        std[index["vx"]] = math.hypot(vx, walk) if walk_apart else max(vx, walk)
+        vx = math.hypot(std[index["vx"]] * validity.inflation(ratios["vx"]), self.lateral_std(drift))
+        self.reference_gap = max(reference_gap, self.reference_gap * self.gap_decay)
+        std[index["vx"]] = max(math.hypot(vx, walk) if walk_apart else max(vx, walk), self.reference_gap)
         std[index["beta"]] = max(math.hypot(std[index["beta"]] * validity.inflation(ratios["beta"]), beta_model_std),
                                  self.kinematic.mismatch)
         return std

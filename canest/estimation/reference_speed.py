@@ -184,6 +184,15 @@ class ReferenceSpeed:
         integrated = t - self.anchored_at
         return math.sqrt(self.anchor_std**2 + (DRIFT * integrated) ** 2 + self.ax_density * integrated)
 
+    def disagreement(self, t: float, speed: float, beside: float = 0.0) -> float:
+        """How far (m/s) an estimate ``speed`` of the same vx lies from the reference at tick ``t`` beyond the
+        reference's std, ``beside`` (an error it shares with what it integrates, not in its own std) in quadrature:
+        the least error the estimate has while the reference is within one std (0 within it, or without an update
+        at ``t``)."""
+        if self.last_t != t:
+            return 0.0
+        return max(0.0, abs(speed - self.speed) - math.hypot(self._std(t), beside))
+
     def integration_std(self, t: float, density: float | None = None) -> float:
         """The std (m/s) of the ax noise's random walk in the speed at tick ``t``, ``sqrt(q T)`` over the ``T`` s
         since the wheels last anchored it (0 while they anchor it, or without an update at ``t``): what a filter

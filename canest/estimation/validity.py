@@ -56,7 +56,18 @@ Published standard deviations get these terms beyond the filter's covariance:
   that reference every tick as a new measurement, but its walk is one error
   they all share (on a vibrating IMU ckf's vx NEES was 4.6, its error at the
   anchors 0.12 m/s where the reference's was 0.035;
-  :meth:`canest.estimation.reference_speed.ReferenceSpeed.integration_std`).
+  :meth:`canest.estimation.reference_speed.ReferenceSpeed.integration_std`);
+- nor more certain than its distance from the reference speed beyond the
+  reference's std (with the lateral drift above, which it integrates too):
+  the least error the estimate has while the reference is within one std
+  (:meth:`canest.estimation.reference_speed.ReferenceSpeed.disagreement`),
+  remembered over ``HOLD`` s, where the wheels' forces drive vx: such a
+  model follows its own course between anchors, with a prior too small for
+  the reference to pull it back (dckf's frictions, drifting on a vibrating
+  launch on 0.35, ran its vx 1.3-1.9 m/s ahead with a std of 0.23, valid,
+  while the reference was 0.4 off with a std of 0.3). A model integrating ax
+  shares the reference's integration, ax and ``r vy`` alike: their
+  difference tells nothing there.
 
 Sideslip also needs the model inside its valid regime. A model with fixed
 tire friction (the single-track model's linear tires, the tire-force
