@@ -123,8 +123,8 @@ def test_vx_is_never_more_certain_than_its_disagreement_with_the_reference_speed
     for half a second (45 of its 275 valid ticks wrong by more than 3 std, up to 6.9), while the reference speed it
     takes was 0.3-0.5 m/s off with a std of 0.3 (a prior that small keeps the reference's pull weak). The published
     std is never below the disagreement with the reference beyond the reference's own std: vx turns "uncertain";
-    left are three ticks where the reference, off the same way, still agreed (3.0-3.6 std; seeds 0-4: 0-3 ticks,
-    at most 3.6 std, were 28-45 ticks, up to 7.2)."""
+    left are three ticks where the reference, off the same way, still agreed (3.0-3.6 std; seeds 0, 1 and 4: 0-1
+    ticks, were 28-36, up to 7.2; seed 3's wheels barely spin)."""
     from canest.apps.compare import with_filter
     from canest.apps.evaluate import read_table
     from canest.apps.replay import replay

@@ -61,7 +61,7 @@ Published standard deviations get these terms beyond the filter's covariance:
   reference's std (with the lateral drift above, which it integrates too):
   the least error the estimate has while the reference is within one std
   (:meth:`canest.estimation.reference_speed.ReferenceSpeed.disagreement`),
-  remembered over ``HOLD`` s, where the wheels' forces drive vx: such a
+  a leaky maximum fading over ``HOLD`` s, where the wheels' forces drive vx: such a
   model follows its own course between anchors, with a prior too small for
   the reference to pull it back (dckf's frictions, drifting on a vibrating
   launch on 0.35, ran its vx 1.3-1.9 m/s ahead with a std of 0.23, valid,
