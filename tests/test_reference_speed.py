@@ -238,6 +238,21 @@ def test_a_gap_in_the_inputs_takes_the_wheels_again():
     assert speed == pytest.approx(RADIUS * 60.0 / (1 + 0.4 / STIFFNESS)) and std == pytest.approx(ANCHORED_STD)
 
 
+def test_while_the_wheels_are_missing_ax_carries_the_speed_and_spinning_wheels_are_not_taken_back():
+    """Wheel frames lost for 0.2 s in a spin: restarted on the wheels, the reference took their spin with the
+    anchored std. Coasting on ax, it keeps its anchor: the wheels, back and still spinning, are not taken."""
+    ref = reference()
+    ref.update(0.0, 0.0, np.full(4, 50.0), ROLLING, ROLLING)
+    for k in range(1, 21):  # the wheels missing for 0.2 s while the car accelerates at 2 m/s^2
+        ref.coast(k * 0.01, 2.0)
+    speed, std = ref.update(0.21, 2.0, np.full(4, 60.0), np.full(4, 30.0), np.full(4, 0.4))
+    assert speed == pytest.approx(RADIUS * 50.0 + 2.0 * 0.21)
+    assert std == pytest.approx(np.hypot(ANCHORED_STD, DRIFT * 0.21))
+    fresh = reference()
+    fresh.coast(0.01, 2.0)  # nothing before a first anchor
+    assert fresh.speed is None
+
+
 def test_time_running_backwards_takes_the_wheels_again():
     """A log whose clock jumps back (two drives concatenated) must not integrate ax over a negative interval."""
     ref = reference()

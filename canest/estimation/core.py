@@ -235,16 +235,19 @@ class Estimator:
 
     def _reference_speed(self, inputs: TickInputs, t: float):
         """(speed, std) of the slip-aware reference speed (:mod:`canest.estimation.reference_speed`), or None
-        without wheel speeds and ax. Motor torques, where mapped, tell which wheels transmit force, else ax and
-        the drive layout."""
-        if not inputs.has(*WHEEL_SPEEDS, "ax"):
+        without wheel speeds and ax (without the wheels alone it integrates ax on, :meth:`ReferenceSpeed.coast`).
+        Motor torques, where mapped, tell which wheels transmit force, else ax and the drive layout."""
+        if not inputs.has("ax"):
+            return None
+        beta, vx, yaw_rate = self.filter.x[self.beta], self.filter.x[self.vx], inputs.current("yaw_rate")
+        vy = vx * math.tan(beta)
+        acceleration = inputs.current("ax") + yaw_rate * vy
+        if not inputs.has(*WHEEL_SPEEDS):  # the speed the wheels left, integrated until they are back
+            self.reference_speed.coast(t, acceleration, self.ax_noise.density or 0.0)
             return None
         speeds = [inputs.values[name] for name in WHEEL_SPEEDS]
         usage = tick_usage(inputs, self.geometry, self.vehicle.wheel_radius, self.layout)
-        beta, vx, yaw_rate = self.filter.x[self.beta], self.filter.x[self.vx], inputs.current("yaw_rate")
-        vy = vx * math.tan(beta)
         accelerations = self.reference_wheel_acceleration.update(t, speeds).tolist()
-        acceleration = inputs.current("ax") + yaw_rate * vy
         delta = self._road_wheel_angle(inputs)
         front_excess = vx * (math.cos(delta) - 1.0) + (vy + self.vehicle.cg_to_front * yaw_rate) * math.sin(delta)
         return self.reference_speed.update(t, acceleration, speeds, accelerations, usage, front_excess,

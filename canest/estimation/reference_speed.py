@@ -153,6 +153,20 @@ class ReferenceSpeed:
         self.last_t = t
         return self.speed, self._std(t)
 
+    def coast(self, t: float, acceleration: float, ax_density: float = 0.0) -> None:
+        """Integrate ``acceleration`` (``ax + r vy``, m/s^2) to tick ``t`` while the wheels are missing: the speed
+        keeps its anchor, so its std grows with the time since, and the wheels, back, anchor it only if they roll
+        freely. Restarted on them after a gap instead, the reference took wheels that spun in a launch on 0.35
+        (their frames lost for 0.2 s) with the anchored std, and jckf's vx ran 2.3 m/s ahead, valid. Nothing
+        before the first anchor, after a gap of ``MAX_GAP`` or when time ran backwards (:meth:`update` starts
+        again on the wheels); the undriven pair's transmission is unknown meanwhile."""
+        if self.speed is None or not 0.0 < t - self.last_t <= MAX_GAP:
+            return
+        self.ax_density = ax_density
+        self.speed += acceleration * (t - self.last_t)
+        self.settled_at = t + PAIR_SETTLE
+        self.last_t = t
+
     def _window_acceleration(self, t: float, acceleration: float) -> tuple[float, float]:
         """The acceleration's mean over the wheel accelerations' window (their Theil-Sen slopes span the same
         ``WINDOW`` samples) and how far a wheel in step may differ from it: ``WHEEL_ACCELERATION_TOLERANCE`` and, in
