@@ -253,6 +253,19 @@ def test_while_the_wheels_are_missing_ax_carries_the_speed_and_spinning_wheels_a
     assert fresh.speed is None
 
 
+def test_wheels_back_after_a_gap_anchor_only_once_their_slopes_span_samples_since_it():
+    """A wheel slope over samples from before the gap says nothing of the wheels now: wheels back 10 rad/s faster,
+    their slopes still those of free rolling, anchored the speed 3.5 m/s high with the anchored std."""
+    ref = reference()
+    for k in range(10):
+        ref.update(k * 0.01, 0.0, np.full(4, 50.0), ROLLING, ROLLING)
+    for k in range(10, 30):
+        ref.coast(k * 0.01, 0.0)
+    speeds = [ref.update(k * 0.01, 0.0, np.full(4, 60.0), ROLLING, ROLLING)[0] for k in range(30, 34)]
+    assert speeds == pytest.approx([RADIUS * 50.0] * 4)
+    assert ref.update(0.34, 0.0, np.full(4, 60.0), ROLLING, ROLLING)[0] == pytest.approx(RADIUS * 60.0)
+
+
 def test_time_running_backwards_takes_the_wheels_again():
     """A log whose clock jumps back (two drives concatenated) must not integrate ax over a negative interval."""
     ref = reference()

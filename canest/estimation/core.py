@@ -211,9 +211,10 @@ class Estimator:
 
     def _shared_walk(self, t: float) -> float:
         """The reference speed's random walk (m/s) at its update on the tick before ``t`` (0 without one there: ax
-        or the wheels missing, stale or saturated, a gap), at ax's noise density as measured now: in the first
-        half second nothing is measured yet, and a vibrating ax had walked the reference 0.4 m/s off unseen
-        (the small vibrating grid's ckf: vx 0.41 m/s off with a std of 0.033 when the wheels anchored it)."""
+        missing, a gap; while the wheels are missing it integrates ax on), at ax's noise density as measured
+        now: in the first half second nothing is measured yet, and a vibrating ax had walked the reference 0.4
+        m/s off unseen (the small vibrating grid's ckf: vx 0.41 m/s off with a std of 0.033 when the wheels
+        anchored it)."""
         previous = self.reference_speed.last_t
         if previous is None or not 0.0 < t - previous <= 1.5 * self.dt:
             return 0.0
@@ -392,7 +393,7 @@ class Estimator:
         # r vy alike), and their difference tells nothing
         gap = 0.0 if self.integrates_ax else reference.disagreement(t, vx, self.judge.lateral_std(drift))
         std = self.judge.widen(std, index, ratios, 0.0 if carried else beta_model_std, drift, self._gyro_noise(inputs),
-                               reference.integration_std(t), self.integrates_ax, gap)
+                               reference.integration_std(t), self.integrates_ax and reference.wheels_t == t, gap)
         values = {
             "vx": vx, "vy": vx * math.tan(beta), "beta": beta, "yaw_rate": x[self.yaw],
             "vx_std": std[self.vx], "vy_std": math.hypot(vx * std[self.beta] / math.cos(beta) ** 2,

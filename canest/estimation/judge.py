@@ -120,11 +120,12 @@ class StateJudge:
         measured over configured (``gyro_noise``, :mod:`canest.estimation.measured_noise`; never narrowed by it),
         vx with its lateral drift and the reference speed's random walk, the error every tick it was updated
         shares (``walk``, :meth:`canest.estimation.reference_speed.ReferenceSpeed.integration_std`): in
-        quadrature where the covariance holds only the error beside it (``walk_apart``: a model integrating ax,
-        whose reference channel leaves the walk out), else never below it, and never below ``reference_gap`` (its
-        distance from the reference beyond the reference's std, ``ReferenceSpeed.disagreement``), a leaky maximum
-        fading over ``validity.HOLD`` s (it alternates tick by tick while vx and the reference cross: vx's bit
-        flickered between valid and uncertain); sideslip with its model error (``beta_model_std``,
+        quadrature where the covariance holds only the error beside it (``walk_apart``: a model integrating
+        ax that took the reference this tick, whose channel leaves the walk out), else never below it, and
+        never below ``reference_gap`` (its distance from the reference beyond the reference's std,
+        ``ReferenceSpeed.disagreement``), a leaky maximum fading over ``validity.HOLD`` s (it alternates tick
+        by tick while vx and the reference cross: vx's bit flickered between valid and uncertain); sideslip
+        with its model error (``beta_model_std``,
         :meth:`sideslip_model_std`), and never below its last mismatch with the kinematic sideslip change."""
         std = std.copy()
         std[index["yaw_rate"]] *= validity.inflation(ratios["yaw_rate"]) * max(gyro_noise, 1.0)

@@ -116,6 +116,7 @@ class ReferenceSpeed:
     def reset(self) -> None:
         self.speed = None
         self.last_t = None
+        self.wheels_t = None  # the last update with the wheels (:meth:`update`, not :meth:`coast`)
         self.anchored_at = None
         self.anchor_std = self.anchored_std
         self.settled_at = math.inf  # from when the undriven pair may anchor the speed alone
@@ -139,7 +140,9 @@ class ReferenceSpeed:
         measured, tolerance = self._window_acceleration(t, acceleration)
         if not usage_measured:
             measured, tolerance = acceleration, WHEEL_ACCELERATION_TOLERANCE
-        in_step = [abs(radius * a - measured) < tolerance for a in wheel_accelerations]
+        # the wheels' slopes span samples from before a gap until the window has refilled: none is in step then
+        refilled = len(self.recent) == WINDOW
+        in_step = [refilled and abs(radius * a - measured) < tolerance for a in wheel_accelerations]
         free = [step and abs(x) < FREE_ROLLING_USAGE for step, x in zip(in_step, usage)]
         restart = self.speed is None or not 0.0 <= t - self.last_t <= MAX_GAP  # a gap, or time ran backwards
         if restart:  # nothing known of what the pair transmitted over the last PAIR_SETTLE s
@@ -150,14 +153,16 @@ class ReferenceSpeed:
             self.speed += acceleration * (t - self.last_t)
         if self.undriven is not None:
             self._undriven_pair(t, acceleration, wheel_speeds, usage, in_step, front_excess)
-        self.last_t = t
+        self.last_t = self.wheels_t = t
         return self.speed, self._std(t)
 
     def coast(self, t: float, acceleration: float, ax_density: float = 0.0) -> None:
         """Integrate ``acceleration`` (``ax + r vy``, m/s^2) to tick ``t`` while the wheels are missing: the speed
         keeps its anchor, so its std grows with the time since, and the wheels, back, anchor it only if they roll
-        freely. Restarted on them after a gap instead, the reference took wheels that spun in a launch on 0.35
-        (their frames lost for 0.2 s) with the anchored std, and jckf's vx ran 2.3 m/s ahead, valid. Nothing
+        freely, once their slopes span samples since the gap. Restarted on them after a gap instead, the
+        reference took wheels that spun in a launch on 0.35 (their frames lost for 0.2 s) with the anchored
+        std, and jckf's vx ran 2.3 m/s ahead, valid. No filter takes it meanwhile, but its walk is the error
+        each took with it (``wheels_t``: the last update with the wheels). Nothing
         before the first anchor, after a gap of ``MAX_GAP`` or when time ran backwards (:meth:`update` starts
         again on the wheels); the undriven pair's transmission is unknown meanwhile."""
         if self.speed is None or not 0.0 < t - self.last_t <= MAX_GAP:
