@@ -125,8 +125,8 @@ class StateJudge:
         never below ``reference_gap`` (its distance from the reference beyond the reference's std,
         ``ReferenceSpeed.disagreement``), a leaky maximum fading over ``validity.HOLD`` s (it alternates tick
         by tick while vx and the reference cross: vx's bit flickered between valid and uncertain); sideslip
-        with its model error (``beta_model_std``,
-        :meth:`sideslip_model_std`), and never below its last mismatch with the kinematic sideslip change."""
+        with its model error (``beta_model_std``, :meth:`sideslip_model_std`), and never below its last
+        mismatch with the kinematic sideslip change."""
         std = std.copy()
         std[index["yaw_rate"]] *= validity.inflation(ratios["yaw_rate"]) * max(gyro_noise, 1.0)
         vx = math.hypot(std[index["vx"]] * validity.inflation(ratios["vx"]), self.lateral_std(drift))

@@ -162,9 +162,9 @@ class ReferenceSpeed:
         freely, once their slopes span samples since the gap. Restarted on them after a gap instead, the
         reference took wheels that spun in a launch on 0.35 (their frames lost for 0.2 s) with the anchored
         std, and jckf's vx ran 2.3 m/s ahead, valid. No filter takes it meanwhile, but its walk is the error
-        each took with it (``wheels_t``: the last update with the wheels). Nothing
-        before the first anchor, after a gap of ``MAX_GAP`` or when time ran backwards (:meth:`update` starts
-        again on the wheels); the undriven pair's transmission is unknown meanwhile."""
+        each took with it (``wheels_t``: the last update with the wheels). Nothing before the first anchor,
+        after a gap of ``MAX_GAP`` or when time ran backwards (:meth:`update` starts again on the wheels); the
+        undriven pair's transmission is unknown meanwhile."""
         if self.speed is None or not 0.0 < t - self.last_t <= MAX_GAP:
             return
         self.ax_density = ax_density
