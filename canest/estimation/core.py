@@ -9,8 +9,8 @@ Per tick (:meth:`Estimator.step`, handed the resampler's sample):
 3. choose the mode: ``low_speed`` below ``min_speed`` (left again above
    ``min_speed + speed_hysteresis``) or when reversing, else ``normal``;
 4. predict with the model (its low-speed transition at low speed);
-5. judge every fresh channel against the prior under the configured noise
-   (:mod:`canest.estimation.validity`), then update with them
+5. judge every fresh channel against the prior under the noise the filter takes
+   (friction's: the configured; :mod:`canest.estimation.validity`), then update with them
    (:mod:`canest.estimation.channels`): the lateral ones (ay, ax) only while
    the lateral model holds, an accelerometer channel's noise never below
    what its samples show (:mod:`canest.estimation.measured_noise`: a
@@ -65,10 +65,11 @@ ACCELEROMETERS = ("ax", "ay", "ax_2", "ay_2")  # measurement channels read strai
 log = logging.getLogger("canest.estimator")
 
 DIVERGENCE_HOLD = 1.0  # s
-# s: the ax noise's density is read from means over this span (canest.estimation.measured_noise), long enough to see
-# a body's vibration as an integration over seconds does (the simulator's, correlated over 15 ms: 0.19-0.25 m/s/sqrt(s)
-# read for 0.24; over 30 ms spans 0.15-0.17), short enough that a clean drive's own ax reads below vx_from_ax
-AX_NOISE_SPAN = 0.1
+# s: the densities of ax's and ay's noise, which integrations over seconds take (the reference speed's walk, the
+# kinematic sideslip), are read from means over this span (canest.estimation.measured_noise), long enough to see a
+# body's vibration as an integration does (the simulator's, correlated over 15 ms: 0.19-0.25 m/s/sqrt(s) read for
+# 0.24; over 30 ms spans 0.15-0.17), short enough that a clean drive's own ax reads below vx_from_ax
+INTEGRATED_NOISE_SPAN = 0.1
 PER_WHEEL_KEYS = {"fy_": "lateral_force", "w_": "wheel_speed", "wheel_speed_": "wheel_speed", "mu_": "friction"}
 
 
@@ -127,7 +128,9 @@ class Estimator:
         self.gyro_holds = {row: (name, GyroHold()) for row, name in enumerate(model.measurement_names)
                            if name in GYROS}
         # the sensors' noise as their samples show it, kept through a filter reset (:mod:`measured_noise`)
-        self.ax_noise = MeasuredNoise(AX_NOISE_SPAN)
+        self.ax_noise = MeasuredNoise(INTEGRATED_NOISE_SPAN)
+        self.ay_noise = MeasuredNoise(INTEGRATED_NOISE_SPAN)
+        self.ay_row = model.measurement_names.index("ay") if "ay" in model.measurement_names else None
         self.input_noise = {name: MeasuredNoise() for name in model.measurement_names
                             if name in ACCELEROMETERS + GYROS}
         self.accelerometer_rows = [(row, self.input_noise[name]) for row, name in enumerate(model.measurement_names)
@@ -190,8 +193,8 @@ class Estimator:
 
     def _process_noise(self, t: float) -> np.ndarray:
         """Q of the prediction at tick ``t``: the configured one; where vx integrates the measured ax (the model's
-        ``vx_noise_key``), vx's never below the measured ax noise's density (:data:`AX_NOISE_SPAN`) and enough to
-        bring vx's variance up to the random walk of the reference speed the filter took since the wheels last
+        ``vx_noise_key``), vx's never below the measured ax noise's density (:data:`INTEGRATED_NOISE_SPAN`) and enough
+        to bring vx's variance up to the random walk of the reference speed the filter took since the wheels last
         anchored it (:meth:`_shared_walk`): its prediction integrates that very ax, so the walk is its error too,
         yet every tick's reference taken as a new measurement had shrunk its variance below it, and an anchor
         could not pull it back (ckf on a vibrating IMU: 0.12 m/s off at the anchors, where the reference was
@@ -298,9 +301,7 @@ class Estimator:
         t = sample.t
         inputs = TickInputs(sample)
         self.derived_ax.add_to(inputs)
-        if inputs.has("ax") and inputs.fresh["ax"]:
-            self.ax_noise.add(t - inputs.ages["ax"], inputs.values["ax"])
-        for name, noise in self.input_noise.items():
+        for name, noise in (("ax", self.ax_noise), ("ay", self.ay_noise), *self.input_noise.items()):
             if inputs.has(name) and inputs.fresh[name]:
                 noise.add(t - inputs.ages[name], inputs.values[name])
         self.stale_before, self.stale_now = self.stale_now, frozenset(n for n, stale in inputs.stale.items() if stale)
@@ -316,8 +317,10 @@ class Estimator:
         self.filter.predict(self.transitions[self.low_speed], u, self.dt, self._process_noise(t))
         lateral_ok = not self.low_speed and inputs.has("steering_wheel_angle", "ay")
         channels = self._channels(inputs, t, lateral_ok)
-        self.judge.record(channels, u, self.filter.x.copy(), self.filter.covariance.copy(), self.stale_before)
-        diverged = self._update(self._measured(channels), inputs, u, lateral_ok, t)
+        measured = self._measured(channels)
+        self.judge.record(channels, measured.std, u, self.filter.x.copy(), self.filter.covariance.copy(),
+                          self.stale_before)
+        diverged = self._update(measured, inputs, u, lateral_ok, t)
         if self.step_times is not None:
             self.step_times.append(time.thread_time() - started)
         finite = all(np.all(np.isfinite(a)) for a in (self.filter.x, self.filter.P, self.filter.covariance))
@@ -350,7 +353,8 @@ class Estimator:
 
     def _measured(self, channels: ch.Channels) -> ch.Channels:
         """The channels as the filter takes them: an accelerometer channel's std never below its noise as its samples
-        show it (:mod:`canest.estimation.measured_noise`); the consistency test keeps the configured one."""
+        show it (:mod:`canest.estimation.measured_noise`); the consistency test takes them too, except friction's
+        (:meth:`canest.estimation.judge.StateJudge.record`)."""
         std = channels.std.copy()
         for row, noise in self.accelerometer_rows:
             measured = noise.std
@@ -363,6 +367,15 @@ class Estimator:
         ratios = [self.input_noise[name].std / self.r_std[row] for row, (name, _) in self.gyro_holds.items()
                   if inputs.has(name) and self.input_noise[name].std is not None]
         return max(ratios, default=1.0)
+
+    def _ay_density(self) -> float:
+        """ay's noise density as its samples show it over :data:`INTEGRATED_NOISE_SPAN`, where its noise is above the
+        configured (0 until then, and for a quiet ay: the kinematic check's tolerance is set for it, and spans of
+        0.1 s read part of a quiet drive's own ay as noise; taken, they let dici-gfckf's sideslip on a drawn car
+        be valid but wrong on 0.3 % of its ticks)."""
+        noise = self.input_noise.get("ay")
+        loud = noise is not None and noise.std is not None and noise.std > self.r_std[self.ay_row]
+        return (self.ay_noise.density or 0.0) if loud else 0.0
 
     def _publish(self, t, mode, missing, inputs: TickInputs, lateral_ok: bool = False) -> Estimate:
         self.last_mode = mode
@@ -385,7 +398,7 @@ class Estimator:
         reference = self.reference_speed  # vx is measured unless the reference integrated ax this tick
         std = np.sqrt(np.maximum(np.diag(self.filter.covariance), 0.0))
         rear_slip = None if self.judge.linear_tires else self._rear_slip(x)  # linear tires: the ay term
-        beta_model_std = self.judge.sideslip_model_std(inputs.current("ay"), rear_slip)
+        beta_model_std = self.judge.sideslip_model_std(vx * x[self.yaw], rear_slip)
         drift = self.judge.drift(inputs, vx, beta, math.hypot(std[self.beta], beta_model_std),
                                  reference.last_t != t or reference.anchored_at == t)
         carried = self.covariance_has_tire_error and not self.low_speed  # the model's Q has the tire error
@@ -402,7 +415,7 @@ class Estimator:
         }
         lateral = {"low_speed": mode == "low_speed", "after_reset": mode == "degraded" and t < self.suspect_until,
                    "zero_learned": self.steering_zero.learned, "lateral_ok": lateral_ok, "beta": beta, "vx": vx,
-                   "delta": self._road_wheel_angle(inputs)}
+                   "delta": self._road_wheel_angle(inputs), "ay_density": self._ay_density()}
         walk_unknown = self.ax_noise.density is None and reference.last_t == t
         causes = self.judge.causes(inputs, ratios, std[self.vx], lateral, t, drift, walk_unknown)
         valid = {name: causes[name] == "valid" for name in causes}

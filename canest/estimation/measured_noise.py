@@ -29,19 +29,21 @@ variance gives it, and it is that scatter the estimate carries. A channel
 sampled more sparsely than two samples a span gets spans of ``PER_SPAN``
 sampling periods (a 20 Hz gyro: 75 ms).
 
-The estimator (:mod:`canest.estimation.core`) takes it four ways, never
+The estimator (:mod:`canest.estimation.core`) takes it five ways, never
 below the configured values, so a quiet sensor changes nothing: an
-accelerometer channel's R (ax, ay; the consistency and divergence tests keep
-the configured noise, as :mod:`canest.estimation.validity` requires; the
+accelerometer channel's R (ax, ay; the consistency test takes it too, but
+friction's and the divergence test keep the configured noise,
+:mod:`canest.estimation.validity`; the
 published ``InnovationNis`` is the filter's, with the R it used); the published yaw
 rate's std, times the gyro's measured over configured noise
 (:meth:`canest.estimation.judge.StateJudge.widen`); vx's process noise where
 vx integrates the measured ax; and the reference speed's std while it
 integrates ax (:mod:`canest.estimation.reference_speed`), both from ax's
-density over 0.1 s spans (:data:`canest.estimation.core.AX_NOISE_SPAN`; the
+density over 0.1 s spans (:data:`canest.estimation.core.INTEGRATED_NOISE_SPAN`; the
 random walk it puts into the reference speed is in that channel's std or,
 where the model integrates ax, in the filter's prior: vx's consistency test
-sees it either way).
+sees it either way); and the kinematic sideslip check's tolerance, from ay's
+density over the same spans (:class:`canest.estimation.validity.KinematicCheck`).
 The gyro's noise is not its R: in a slide (the DLC on friction 0.35) the
 yaw rate's own fast changes read as noise, and svd-fckf, whose adaptive R
 may grow to ten times the R it is given, stopped following its gyro (yaw
