@@ -43,7 +43,7 @@ density over 0.1 s spans (:data:`canest.estimation.core.INTEGRATED_NOISE_SPAN`; 
 random walk it puts into the reference speed is in that channel's std or,
 where the model integrates ax, in the filter's prior: vx's consistency test
 sees it either way); and the kinematic sideslip check's tolerance, from ay's
-density over the same spans (:class:`canest.estimation.validity.KinematicCheck`).
+density over the same spans where ay is louder than configured (:class:`canest.estimation.validity.KinematicCheck`).
 The gyro's noise is not its R: in a slide (the DLC on friction 0.35) the
 yaw rate's own fast changes read as noise, and svd-fckf, whose adaptive R
 may grow to ten times the R it is given, stopped following its gyro (yaw

@@ -11,8 +11,8 @@ is normalized by what the sensor's noise and the prior spread explain:
 samples show it where that is larger (:mod:`canest.estimation.measured_noise`:
 the scatter of the signal, no model, no innovation; the R every filter takes
 for it). A vibrating body shakes ay by 1.4 m/s^2 where 0.15 is configured:
-judged by the configured noise the sideslip was never valid on such an IMU,
-which is every real car's. Friction alone keeps the configured noise (its
+judged by the configured noise the sideslip was never valid on such an IMU
+(issue 17's real car's ay jumped so). Friction alone keeps the configured noise (its
 one-sided gate turns a noisy IMU into a falling estimate:
 :mod:`canest.estimation.two_track`).
 
@@ -40,7 +40,8 @@ Published standard deviations get these terms beyond the filter's covariance:
 - the sideslip's model error: a rear cornering stiffness off by a relative
   ``e`` moves the steady-state sideslip by ``e m a |ay| / (L C_r)`` (rear
   slip angle ``alpha_r = F_yr / C_r`` with ``F_yr = m ay a / L``), added in
-  quadrature, at ``|v r|`` for ``ay`` (the steady-state ay; a vibrating ay would shake the term). A user's
+  quadrature, at ``|v r|`` for ``ay`` (the steady-state ay; a vibrating ay would shake the term), held as a
+  leaky maximum over ``MODEL_ERROR_MEMORY`` (:meth:`canest.estimation.judge.StateJudge.sideslip_model_std`). A user's
   stiffness is uncertain by ``e_0``
   (``vehicle.cornering_stiffness_uncertainty``: 0.3 for textbook values); a model with linear tires adds
   ``e_2 (ay / g)^2``, because every tire's secant stiffness falls with the
@@ -93,7 +94,8 @@ And sideslip must move as the car says it moves: over the last
 ``KINEMATIC_WINDOW`` s the model's sideslip change must agree with the
 kinematic one, the integral of ``ay / vx - r`` (gyro and accelerometer
 only, no model; biases drift it by ~0.1 deg/s, so a short window), within
-``KINEMATIC_TOLERANCE`` (absolute plus relative) (:class:`KinematicCheck`).
+``KINEMATIC_TOLERANCE`` (absolute plus relative; and, for an ay louder than
+configured, its integrated noise) (:class:`KinematicCheck`).
 A car sliding into a slow spin on low friction keeps small innovations while
 the model's sideslip stays near zero; the kinematic sideslip sees the slide.
 
@@ -280,12 +282,13 @@ class KinematicCheck:
     0.35 outran jckf's sideslip by 0.8 deg per window, inside the tolerance, until it was 2 deg off with a std
     of 0.62, flagged valid; in a lane change the difference swings both ways and cancels.
 
-    ay's noise integrates into both: a vibrating ay (1.4 m/s^2, correlated over 15 ms) puts 0.46 deg of noise
+    ay's noise integrates into both: a vibrating ay (1.4 m/s^2, correlated over 15 ms) puts 0.45 deg of noise
     into the kinematic change per half second at 80 km/h, and the window's 0.5 deg failed a model that follows
-    the car exactly. The tolerance and the allowance take ``KINEMATIC_NOISE_GATE`` standard deviations of that
-    integrated noise (from ay's measured density), in quadrature: independent of the biases and of the model's
-    share (their sum let the sideslip on a vibrating IMU be valid on 33 % of the ticks and wrong on 0.1-1.0 %
-    of them; in quadrature 9-23 % and 0.0-0.2 %)."""
+    the car exactly. For an ay louder than configured (``ay_density`` 0 otherwise) the tolerance and the
+    allowance take ``KINEMATIC_NOISE_GATE`` standard deviations of that integrated noise (from ay's measured
+    density), in quadrature: independent of the biases and of the model's share (their sum let the sideslip
+    on the vibrating honesty grid be valid on 28-58 % of the ticks and wrong on 0.1-1.0 % of them; in
+    quadrature 10-29 % and 0.0-0.3 %)."""
 
     def __init__(self, dt: float):
         self.dt = dt
