@@ -404,9 +404,11 @@ class Estimator:
         carried = self.covariance_has_tire_error and not self.low_speed  # the model's Q has the tire error
         # vx driven by the wheels' forces can leave the reference; one integrating ax shares its integration (ax and
         # r vy alike), and their difference tells nothing
-        gap = 0.0 if self.integrates_ax else reference.disagreement(t, vx, self.judge.lateral_std(drift))
-        std = self.judge.widen(std, index, ratios, 0.0 if carried else beta_model_std, drift, self._gyro_noise(inputs),
-                               reference.integration_std(t), self.integrates_ax and reference.wheels_t == t, gap)
+        lateral = self.judge.lateral_std(drift)
+        gap = 0.0 if self.integrates_ax else reference.disagreement(t, vx, lateral)
+        std = self.judge.widen(std, index, ratios, 0.0 if carried else beta_model_std, lateral,
+                               self._gyro_noise(inputs), reference.integration_std(t),
+                               self.integrates_ax and reference.wheels_t == t, gap)
         values = {
             "vx": vx, "vy": vx * math.tan(beta), "beta": beta, "yaw_rate": x[self.yaw],
             "vx_std": std[self.vx], "vy_std": math.hypot(vx * std[self.beta] / math.cos(beta) ** 2,

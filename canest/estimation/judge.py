@@ -131,22 +131,21 @@ class StateJudge:
         return inputs.values["ay"] - ay_offset, inputs.values["yaw_rate"] - yaw_offset
 
     def widen(self, std: np.ndarray, index: dict, ratios: dict, beta_model_std: float,
-              drift: float = 0.0, gyro_noise: float = 1.0, walk: float = 0.0, walk_apart: bool = False,
+              lateral: float = 0.0, gyro_noise: float = 1.0, walk: float = 0.0, walk_apart: bool = False,
               reference_gap: float = 0.0) -> np.ndarray:
         """The published std: each state's by its channels' consistency, the yaw rate's also by its gyro's noise as
-        measured over configured (``gyro_noise``, :mod:`canest.estimation.measured_noise`; never narrowed by it),
-        vx with its lateral drift and the reference speed's random walk, the error every tick it was updated
-        shares (``walk``, :meth:`canest.estimation.reference_speed.ReferenceSpeed.integration_std`): in
-        quadrature where the covariance holds only the error beside it (``walk_apart``: a model integrating
-        ax that took the reference this tick, whose channel leaves the walk out), else never below it, and
-        never below ``reference_gap`` (its distance from the reference beyond the reference's std,
-        ``ReferenceSpeed.disagreement``), a leaky maximum fading over ``validity.HOLD`` s (it alternates tick
-        by tick while vx and the reference cross: vx's bit flickered between valid and uncertain); sideslip
-        with its model error (``beta_model_std``, :meth:`sideslip_model_std`), and never below its last
-        mismatch with the kinematic sideslip change."""
+        measured over configured (``gyro_noise``, :mod:`canest.estimation.measured_noise`; never narrowed by it), vx
+        with its lateral drift (``lateral``, :meth:`lateral_std`) and the reference speed's random walk, the error every
+        tick it was updated shares (``walk``, :meth:`canest.estimation.reference_speed.ReferenceSpeed.integration_std`):
+        in quadrature where the covariance holds only the error beside it (``walk_apart``: a model integrating ax that
+        took the reference this tick, whose channel leaves the walk out), else never below it, and never below
+        ``reference_gap`` (its distance from the reference beyond the reference's std, ``ReferenceSpeed.disagreement``),
+        a leaky maximum fading over ``validity.HOLD`` s (it alternates tick by tick while vx and the reference cross:
+        vx's bit flickered between valid and uncertain); sideslip with its model error (``beta_model_std``,
+        :meth:`sideslip_model_std`), and never below its last mismatch with the kinematic sideslip change."""
         std = std.copy()
         std[index["yaw_rate"]] *= validity.inflation(ratios["yaw_rate"]) * max(gyro_noise, 1.0)
-        vx = math.hypot(std[index["vx"]] * validity.inflation(ratios["vx"]), self.lateral_std(drift))
+        vx = math.hypot(std[index["vx"]] * validity.inflation(ratios["vx"]), lateral)
         std[index["vx"]] = max(math.hypot(vx, walk) if walk_apart else max(vx, walk),
                                self.reference_gap.update(reference_gap))
         std[index["beta"]] = max(math.hypot(std[index["beta"]] * validity.inflation(ratios["beta"]), beta_model_std),
