@@ -79,7 +79,7 @@ def test_friction_disagreeing_with_the_measured_forces_is_not_valid(vibrating, n
     assert vibrating[name]["yaw_rate"].wrong_sign == 0
 
 
-@pytest.mark.parametrize("name", VIBRATING)
+@pytest.mark.parametrize("name", ("ckf", "jckf"))  # dckf's: only off its tires' limit (the dual filter's test below)
 def test_the_sideslip_on_a_vibrating_imu_is_valid_and_right(vibrating, name):
     """ay vibrating by 1.4 m/s^2 where 0.15 is configured: judged by the configured noise the sideslip was never
     valid on such an IMU (issue 17's real car's ay jumped so). Judged by the noise ay's samples show, with the
@@ -164,19 +164,23 @@ def test_a_drawn_car_grid_drives_one_car_per_seed_as_wrong_as_the_config_admits(
     assert all(case.mismatch(vehicle) == PlantMismatch() for case in exact)
 
 
-@pytest.mark.parametrize("name, case, bound", [
-    ("jckf", honesty.Case("sine", 80.0, 0.35, 2, car="drawn"), 0.0),  # ay bias -0.21: a slide the kinematic test missed
-    ("dckf", honesty.Case("step", 80.0, 0.85, 1, car="drawn"), 0.02),  # rear stiffness x1.25
-])
-def test_the_sideslip_std_carries_a_stiffness_error_near_the_tire_limit(tmp_path, name, case, bound):
-    """On cars drawn as wrong as their config admits, jckf's and dckf's sideslip was 3-4 and 2.6 deg off with
-    stds of 0.8-1.2 and 1.06, valid (23 and 22 % of these drives' valid ticks): the stiffness term was the linear
-    tire's. It is the estimate's rear slip angle times the stiffness's uncertainty now; dckf's is still wrong on
-    0.5 % of this drive's valid ticks, valid on 28 % (its friction estimate takes part of the stiffness error:
-    open; 1.6 % of 42 % before the wheels were held to ax's mean over their window)."""
-    result = honesty.run_case(CONFIG, [name], case, tmp_path)
-    score = honesty.summarize("beta", result["sums"][name]["beta"])
-    assert score.valid > 0.2 and score.vbw <= bound, score
+def test_the_sideslip_std_carries_a_stiffness_error_near_the_tire_limit(tmp_path):
+    """On a car drawn as wrong as its config admits (ay bias -0.21), jckf's sideslip in a slide the kinematic test
+    missed was 3-4 deg off with stds of 0.8-1.2, valid (23 % of this drive's valid ticks): the stiffness term was
+    the linear tire's. It is the estimate's rear slip angle times the stiffness's uncertainty now."""
+    result = honesty.run_case(CONFIG, ["jckf"], honesty.Case("sine", 80.0, 0.35, 2, car="drawn"), tmp_path)
+    score = honesty.summarize("beta", result["sums"]["jckf"]["beta"])
+    assert score.valid > 0.2 and score.vbw == 0.0, score
+
+
+def test_the_dual_filter_s_sideslip_is_not_valid_on_a_tire_at_a_friction_it_cannot_bound(tmp_path):
+    """dckf's frictions carry a bias no covariance bounds (``canest.filters.dual``); where a tire works at its limit
+    they set the sideslip. On this car (rear stiffness x1.25) the step steer on 0.85 left its rear frictions at
+    0.45-0.55, then one at 0.11, and its sideslip 2-3.5 deg off with a std of 0.9-1.2, valid on 28 % of the ticks
+    and wrong on 0.5 % of those. Now it is valid only before the step, where no tire is at its limit (8 %)."""
+    result = honesty.run_case(CONFIG, ["dckf"], honesty.Case("step", 80.0, 0.85, 1, car="drawn"), tmp_path)
+    score = honesty.summarize("beta", result["sums"]["dckf"]["beta"])
+    assert score.valid > 0.05 and score.vbw == 0.0 and score.max_error < 0.5, score
 
 
 def test_the_lateral_forces_std_is_the_tire_curves_error_not_a_random_walks(tmp_path):

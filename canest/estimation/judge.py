@@ -184,9 +184,11 @@ class StateJudge:
         return cause
 
     def _lateral_cause(self, inputs, ratio: float, low_speed: bool, after_reset: bool, zero_learned: bool,
-                       lateral_ok: bool, beta: float, vx: float, delta: float, ay_density: float) -> str:
+                       lateral_ok: bool, beta: float, vx: float, delta: float, ay_density: float,
+                       unbounded_limit: bool) -> str:
         """Why sideslip (and the lateral forces) are not valid, or "valid" (a steering zero still being learned:
-        "initializing")."""
+        "initializing"); ``unbounded_limit``: a tire works at its limit at a friction whose error no covariance
+        bounds (:meth:`canest.estimation.two_track.FrictionEstimator._at_unbounded_limit`), "model_regime"."""
         if low_speed:
             return "low_speed"
         if after_reset:
@@ -200,5 +202,6 @@ class StateJudge:
             self.kinematic.reset()
             return cause
         moving_as_measured = self.kinematic.inside(beta, *self._kinematic_inputs(inputs), vx, ay_density)
-        in_regime = self.regime is None or self.regime.inside(delta, vx, inputs.values["yaw_rate"])
+        in_regime = not unbounded_limit and (self.regime is None or
+                                             self.regime.inside(delta, vx, inputs.values["yaw_rate"]))
         return "valid" if moving_as_measured and in_regime else "model_regime"
