@@ -79,7 +79,7 @@ def test_friction_disagreeing_with_the_measured_forces_is_not_valid(vibrating, n
     assert vibrating[name]["yaw_rate"].wrong_sign == 0
 
 
-@pytest.mark.parametrize("name", ("ckf", "jckf"))  # dckf's: only off its tires' limit (the dual filter's test below)
+@pytest.mark.parametrize("name", ("ckf", "jckf"))  # dckf's is at a tire's limit on these drives: never valid
 def test_the_sideslip_on_a_vibrating_imu_is_valid_and_right(vibrating, name):
     """ay vibrating by 1.4 m/s^2 where 0.15 is configured: judged by the configured noise the sideslip was never
     valid on such an IMU (issue 17's real car's ay jumped so). Judged by the noise ay's samples show, with the

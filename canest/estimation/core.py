@@ -344,7 +344,7 @@ class Estimator:
         """Add model-specific values, ``_std``, validity and causes (none for the single-track model); ``ratios``:
         this tick's consistency ratio per state (:meth:`StateJudge.ratios`)."""
 
-    def _at_unbounded_limit(self) -> bool:
+    def _at_limit_of_unbounded_friction(self) -> bool:
         """A tire works at its limit at an estimated friction whose error no covariance bounds (the sideslip
         rests on it: :meth:`canest.estimation.judge.StateJudge.causes`); never for a model without frictions."""
         return False
@@ -423,7 +423,7 @@ class Estimator:
         lateral = {"low_speed": mode == "low_speed", "after_reset": mode == "degraded" and t < self.suspect_until,
                    "zero_learned": self.steering_zero.learned, "lateral_ok": lateral_ok, "beta": beta, "vx": vx,
                    "delta": self._road_wheel_angle(inputs), "ay_density": self._ay_density(),
-                   "unbounded_limit": self._at_unbounded_limit()}
+                   "at_limit_of_unbounded_friction": self._at_limit_of_unbounded_friction()}
         walk_unknown = self.ax_noise.density is None and reference.last_t == t
         causes = self.judge.causes(inputs, ratios, std[self.vx], lateral, t, drift, walk_unknown)
         valid = {name: causes[name] == "valid" for name in causes}

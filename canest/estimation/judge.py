@@ -29,7 +29,8 @@ class StateJudge:
         self.consistency = validity.Consistency(model.measurement_names)
         self.friction_consistency = validity.Consistency(model.measurement_names)  # under the configured noise
         self.holds = validity.Holds()
-        # a model that estimates friction covers saturation itself; the others are judged by the linear regime
+        # a model that estimates friction covers saturation itself (dckf's sideslip: not at a tire's limit,
+        # :meth:`_lateral_cause`); the others are judged by the linear regime
         self.regime = None if getattr(model, "parameters", 0) else validity.LinearRegime(vehicle, dt)
         self.kinematic = validity.KinematicCheck(dt)
         self.lateral_drift = validity.LateralDrift(dt)
@@ -185,10 +186,11 @@ class StateJudge:
 
     def _lateral_cause(self, inputs, ratio: float, low_speed: bool, after_reset: bool, zero_learned: bool,
                        lateral_ok: bool, beta: float, vx: float, delta: float, ay_density: float,
-                       unbounded_limit: bool) -> str:
+                       at_limit_of_unbounded_friction: bool) -> str:
         """Why sideslip (and the lateral forces) are not valid, or "valid" (a steering zero still being learned:
-        "initializing"); ``unbounded_limit``: a tire works at its limit at a friction whose error no covariance
-        bounds (:meth:`canest.estimation.two_track.FrictionEstimator._at_unbounded_limit`), "model_regime"."""
+        "initializing"); ``at_limit_of_unbounded_friction``: a tire works at its limit at a friction whose error no
+        covariance bounds (:meth:`canest.estimation.two_track.FrictionEstimator._at_limit_of_unbounded_friction`),
+        "model_regime"."""
         if low_speed:
             return "low_speed"
         if after_reset:
@@ -202,6 +204,6 @@ class StateJudge:
             self.kinematic.reset()
             return cause
         moving_as_measured = self.kinematic.inside(beta, *self._kinematic_inputs(inputs), vx, ay_density)
-        in_regime = not unbounded_limit and (self.regime is None or
-                                             self.regime.inside(delta, vx, inputs.values["yaw_rate"]))
+        in_regime = self.regime is None or self.regime.inside(delta, vx, inputs.values["yaw_rate"])
+        in_regime = in_regime and not at_limit_of_unbounded_friction
         return "valid" if moving_as_measured and in_regime else "model_regime"

@@ -182,13 +182,14 @@ class FrictionEstimator(Estimator):
         self.filter.parameters.may_rise = at_limit
         return self._apply(channels, u, t)
 
-    def _at_unbounded_limit(self) -> bool:
+    def _at_limit_of_unbounded_friction(self) -> bool:
         """A tire at its limit at the estimated friction (``may_rise``, :meth:`_update`) in a filter whose covariance
         does not bound the frictions' error (``parameters_valid`` false: dckf, whose frictions carry the bias of
         step 3, :mod:`canest.filters.dual`). There the friction sets the sideslip, and that bias with it: on a
         drawn car of the honesty grid (rear stiffness x1.25) the step steer on 0.85 left dckf's rear frictions at
-        0.45-0.55, then one at 0.11, and its sideslip 2-3.5 deg off with a std of 0.9-1.2, valid on a quarter of
-        those ticks (within 2 std on 32 % of them)."""
+        0.45-0.55, then one at 0.11, and its sideslip 2-3.5 deg off with a std of 0.9-1.2, valid on 28 % of that
+        drive's ticks (within 2 std on 31 % of those). ``may_rise`` is the last update's (a fresh filter's is
+        all true: on a reset's tick the sideslip is ``after_reset`` first)."""
         return not self.filter.parameters_valid and bool(self.filter.parameters.may_rise.any())
 
     def _plausibly_lower_friction(self) -> np.ndarray:

@@ -88,7 +88,10 @@ compares the gyro with the linear steady-state yaw rate of the steering,
 ``r_ref = vx delta / (L + K_us vx^2)`` (understeer gradient
 ``K_us = m (b C_r - a C_f) / (L C_f C_r)``), lagged by the yaw response
 ``REGIME_LAG``: beyond ``REGIME_TOLERANCE`` (absolute plus relative) the tires
-saturate and the sideslip is ``model_regime``.
+saturate and the sideslip is ``model_regime``. A model that estimates friction
+explains saturation itself, unless its frictions' error is bounded by no
+covariance (dckf): then its sideslip is ``model_regime`` while a tire works at
+its limit (:meth:`canest.estimation.two_track.FrictionEstimator._at_limit_of_unbounded_friction`).
 
 And sideslip must move as the car says it moves: over the last
 ``KINEMATIC_WINDOW`` s the model's sideslip change must agree with the
