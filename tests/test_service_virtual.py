@@ -31,7 +31,7 @@ def test_live_service_matches_offline_replay(config, dlc_run):
     player_bus = can.Bus(interface="virtual", channel="svc-in", preserve_timestamps=True)
 
     def player():
-        time.sleep(0.2)
+        service.listening.wait(10)
         for frame in paced(frames):
             reached[0] = frame.timestamp
             player_bus.send(frame)
@@ -79,7 +79,7 @@ def test_idle_bus_keeps_ticking_and_reports_missing_inputs(config, dlc_run):
     first_second = [f for f in sim.frames if f.timestamp < sim.frames[0].timestamp + 1.0]
 
     def player():
-        time.sleep(0.2)
+        service.listening.wait(10)
         play_messages(first_second, player_bus)
         time.sleep(1.0)  # the bus goes quiet
         service.stop()
@@ -152,7 +152,7 @@ def test_monitor_shows_estimates_and_health_of_a_running_service(config, dlc_run
     out = io.StringIO()
 
     def player():
-        time.sleep(0.2)
+        service.listening.wait(10)
         play_messages(sim.frames[:2500], player_bus)
         service.stop()
 

@@ -91,7 +91,7 @@ def run_demo(config: Config, maneuver="dlc", speed_kmh=80.0, mu=0.85, seed=0, pl
     player_bus = can.Bus(interface="virtual", channel=INPUT_CHANNEL)
 
     def player():
-        time.sleep(0.3)  # let the service open its bus
+        service.listening.wait()  # a virtual bus gives a frame only to the buses open when it is sent
         clock["wall0"] = time.time()
         try:
             play_messages(sim.frames, player_bus, speed=playback_speed, stop=service.stopping)

@@ -69,6 +69,7 @@ class Service:
         self.reload_config = reload_config
         self.notifier = notifier or Notifier()
         self.stopping = threading.Event()
+        self.listening = threading.Event()  # the input bus is open: frames sent from now on are received
         self.reload_requested = threading.Event()
         self.status_requested = threading.Event()
         self.counts = Counter(ticks=0, sent=0, send_dropped=0, superseded=0)
@@ -115,6 +116,7 @@ class Service:
     def run(self) -> dict:
         """Open the buses and loop; returns the frame summary when stopped."""
         self._open()
+        self.listening.set()
         log.info("estimating: %s -> %s, filter %s at %.0f Hz", self.config.input_bus.channel,
                  self.config.output_bus.channel, self.config.estimator.filter, self.config.estimator.rate_hz)
         schedule = _Schedule(self.notifier.watchdog_interval)
