@@ -21,7 +21,8 @@ def test_a_full_output_queue_drops_frames_without_blocking(config, dlc_run):
     player = can.Bus(interface="virtual", channel="full-in")
 
     def play():
-        time.sleep(0.2)
+        if not service.wait_until_listening(10):
+            return service.stop()
         for frame in paced(sim.frames[:1500]):
             player.send(frame)
         service.stop()

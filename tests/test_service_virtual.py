@@ -4,11 +4,13 @@ import time
 
 import can
 import numpy as np
+import pytest
 
 from canest.settings import BusConfig
 from canest.apps.demo import run_demo
 from canest.apps.replay import paced, play_messages, replay
 from canest.apps.service import Service
+from canest.errors import BusOpenError
 from canest.io.sinks import CallbackSink
 
 
@@ -31,7 +33,8 @@ def test_live_service_matches_offline_replay(config, dlc_run):
     player_bus = can.Bus(interface="virtual", channel="svc-in", preserve_timestamps=True)
 
     def player():
-        service.listening.wait(10)
+        if not service.wait_until_listening(10):
+            return service.stop()
         for frame in paced(frames):
             reached[0] = frame.timestamp
             player_bus.send(frame)
@@ -79,7 +82,8 @@ def test_idle_bus_keeps_ticking_and_reports_missing_inputs(config, dlc_run):
     first_second = [f for f in sim.frames if f.timestamp < sim.frames[0].timestamp + 1.0]
 
     def player():
-        service.listening.wait(10)
+        if not service.wait_until_listening(10):
+            return service.stop()
         play_messages(first_second, player_bus)
         time.sleep(1.0)  # the bus goes quiet
         service.stop()
@@ -152,7 +156,8 @@ def test_monitor_shows_estimates_and_health_of_a_running_service(config, dlc_run
     out = io.StringIO()
 
     def player():
-        service.listening.wait(10)
+        if not service.wait_until_listening(10):
+            return service.stop()
         play_messages(sim.frames[:2500], player_bus)
         service.stop()
 
@@ -171,3 +176,23 @@ def test_monitor_shows_estimates_and_health_of_a_running_service(config, dlc_run
     assert "CRC errors 0  counter gaps 0" in last
     vx_line = next(line for line in last.splitlines() if line.startswith("vx "))
     assert 21.5 < float(vx_line.split()[1]) < 23.0 and vx_line.endswith("yes")
+
+
+def test_a_player_waiting_for_the_buses_returns_when_they_cannot_open(config):
+    """A thread that plays frames in waits until the service listens (a bus gives a frame only to the receivers
+    open when it is sent); a service whose bus does not open tells it at once instead of leaving it waiting."""
+    service = Service(config.with_buses(BusConfig("virtual", "wait-in"), BusConfig("no-such-interface", "x")))
+    waited = []
+    waiter = threading.Thread(target=lambda: waited.append(service.wait_until_listening(60.0)))
+    waiter.start()
+    started = time.monotonic()
+    with pytest.raises(BusOpenError):
+        service.run()
+    waiter.join(10.0)
+    assert waited == [False] and time.monotonic() - started < 10.0
+    running = Service(config.with_buses(BusConfig("virtual", "wait-in"), BusConfig("virtual", "wait-out")))
+    thread = threading.Thread(target=running.run)
+    thread.start()
+    assert running.wait_until_listening(10.0)
+    running.stop()
+    thread.join()

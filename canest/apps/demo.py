@@ -91,7 +91,8 @@ def run_demo(config: Config, maneuver="dlc", speed_kmh=80.0, mu=0.85, seed=0, pl
     player_bus = can.Bus(interface="virtual", channel=INPUT_CHANNEL)
 
     def player():
-        service.listening.wait()  # a virtual bus gives a frame only to the buses open when it is sent
+        if not service.wait_until_listening(30.0):  # a virtual bus gives a frame only to the buses open then
+            return service.stop()
         clock["wall0"] = time.time()
         try:
             play_messages(sim.frames, player_bus, speed=playback_speed, stop=service.stopping)

@@ -58,7 +58,8 @@ class Service:
     or a callback) and the newest of each pass to the output bus.
     ``reload_config`` (no arguments, returns a Config) is called on SIGHUP.
     ``clock`` is the time base of the input frames' timestamps, read when the bus is idle: ``time.time`` for
-    SocketCAN's and python-can's receive stamps.
+    SocketCAN's and python-can's receive stamps. :meth:`wait_until_listening` tells a thread that plays frames
+    in when to start: a bus gives a frame only to the receivers open when it is sent.
     """
 
     def __init__(self, config: Config, sinks=(), reload_config=None, notifier=None, clock=time.time):
@@ -69,7 +70,7 @@ class Service:
         self.reload_config = reload_config
         self.notifier = notifier or Notifier()
         self.stopping = threading.Event()
-        self.listening = threading.Event()  # the input bus is open: frames sent from now on are received
+        self.listening = threading.Event()  # set once, when run() has opened the buses (not cleared after)
         self.reload_requested = threading.Event()
         self.status_requested = threading.Event()
         self.counts = Counter(ticks=0, sent=0, send_dropped=0, superseded=0)
@@ -80,6 +81,15 @@ class Service:
 
     def stop(self, *_args) -> None:
         self.stopping.set()
+
+    def wait_until_listening(self, timeout: float) -> bool:
+        """Wait until :meth:`run` has opened the buses (True), or it stopped or failed to open them, or ``timeout``
+        s passed (False)."""
+        deadline = time.monotonic() + timeout
+        while not self.listening.wait(0.05):
+            if self.stopping.is_set() or time.monotonic() > deadline:
+                return False
+        return True
 
     def install_signal_handlers(self) -> None:
         signal.signal(signal.SIGTERM, self.stop)
@@ -115,7 +125,11 @@ class Service:
 
     def run(self) -> dict:
         """Open the buses and loop; returns the frame summary when stopped."""
-        self._open()
+        try:
+            self._open()
+        except BaseException:
+            self.stopping.set()  # a thread waiting for the buses returns
+            raise
         self.listening.set()
         log.info("estimating: %s -> %s, filter %s at %.0f Hz", self.config.input_bus.channel,
                  self.config.output_bus.channel, self.config.estimator.filter, self.config.estimator.rate_hz)

@@ -64,7 +64,8 @@ def virtual(config, frames, multipliers):
     thread = threading.Thread(target=service.run)
     thread.start()
     player = can.Bus(interface="virtual", channel="bench-in")
-    time.sleep(0.3)
+    if not service.wait_until_listening(30.0):
+        raise SystemExit("the service did not open its buses")
     print("virtual bus, in process (CPU: the whole process, player included)\n" + HEADER)
     for multiplier in multipliers:
         before = service.summary().get("frames", 0)
