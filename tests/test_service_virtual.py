@@ -196,3 +196,32 @@ def test_a_player_waiting_for_the_buses_returns_when_they_cannot_open(config):
     assert running.wait_until_listening(10.0)
     running.stop()
     thread.join()
+
+
+def test_a_reload_whose_buses_do_not_open_keeps_the_running_ones(config, dlc_run):
+    """SIGHUP with a config naming a bus that does not open: the daemon logs it and runs on with its config and
+    buses (it had closed them first, and the open's error ended the daemon)."""
+    _, _, sim = dlc_run
+    live_config = config.with_buses(BusConfig("virtual", "reload-in"), BusConfig("virtual", "reload-out"))
+    broken = live_config.with_buses(BusConfig("no-such-interface", "x"), BusConfig("virtual", "reload-out"))
+    service = Service(live_config, reload_config=lambda: broken)
+    player_bus = can.Bus(interface="virtual", channel="reload-in")
+    thread = threading.Thread(target=service.run)
+    thread.start()
+    try:
+        assert service.wait_until_listening(10)
+        service.reload_requested.set()
+        deadline = time.monotonic() + 10
+        while service.counts["reload_failed"] == 0 and thread.is_alive() and time.monotonic() < deadline:
+            time.sleep(0.02)
+        frames = sim.frames[:300]
+        play_messages(frames, player_bus)
+        while service.summary()["decoded"] < len(frames) and thread.is_alive() and time.monotonic() < deadline:
+            time.sleep(0.02)
+        assert thread.is_alive(), "the reload ended the service"
+    finally:
+        service.stop()
+        thread.join()
+        player_bus.shutdown()
+    assert service.counts["reload_failed"] == 1 and service.config is live_config
+    assert service.summary()["decoded"] == len(frames)

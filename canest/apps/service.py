@@ -22,8 +22,9 @@ What the loop guarantees:
   out, WATCHDOG=1 from the loop itself (a hung loop is restarted, an idle bus
   is not), STATUS= with input rate, tick rate and mode;
 - SIGTERM/SIGINT stop it cleanly; SIGHUP reloads the config (buses are
-  reopened only if their settings changed; a broken config is logged and the
-  running one kept); SIGUSR1 logs the status now.
+  reopened only if their settings changed, the new ones opened before the
+  running ones close; a broken config, or one whose buses do not open, is
+  logged and the running one kept); SIGUSR1 logs the status now.
 """
 from __future__ import annotations
 
@@ -36,9 +37,10 @@ from collections import Counter, deque
 
 import numpy as np
 
+from canest.codec.decode import InputDecoder
 from canest.io.bus import BusLink
 from canest.io.sinks import BusSink
-from canest.errors import ConfigError
+from canest.errors import BusOpenError, ConfigError
 from canest.settings import Config
 from canest.apps.notify import Notifier
 from canest.pipeline import Pipeline, format_summary
@@ -98,10 +100,23 @@ class Service:
         signal.signal(signal.SIGUSR1, lambda *_: self.status_requested.set())
 
     def _open(self) -> None:
-        input_kwargs = self.config.input_bus.kwargs()
-        output_kwargs = self.config.output_bus.kwargs()
-        self.inputs = BusLink(input_kwargs, "input", self.counts, can_filters=self.pipeline.decoder.can_filters())
-        self.outputs = self.inputs if output_kwargs == input_kwargs else BusLink(output_kwargs, "output", self.counts)
+        self._use(self._links(self.config, self.pipeline.decoder.can_filters()))
+
+    def _links(self, config: Config, can_filters) -> tuple:
+        """(input, output) links opened for ``config``'s buses (one if they are the same); the input one closed
+        again if the output one does not open."""
+        input_kwargs, output_kwargs = config.input_bus.kwargs(), config.output_bus.kwargs()
+        inputs = BusLink(input_kwargs, "input", self.counts, can_filters=can_filters)
+        if output_kwargs == input_kwargs:
+            return inputs, inputs
+        try:
+            return inputs, BusLink(output_kwargs, "output", self.counts)
+        except BusOpenError:
+            inputs.close()
+            raise
+
+    def _use(self, links: tuple) -> None:
+        self.inputs, self.outputs = links
         self.bus_sink = BusSink(self.outputs, self.pipeline.encoder, self.counts)
 
     def _close(self) -> None:
@@ -201,13 +216,21 @@ class Service:
             log.error("reload failed, keeping the running config: %s", exc)
             return
         buses_changed = (config.input_bus, config.output_bus) != (self.config.input_bus, self.config.output_bus)
+        links = None
+        if buses_changed:  # opened before anything changes: buses that do not open leave all as it runs
+            try:
+                links = self._links(config, InputDecoder(config).can_filters())
+            except (BusOpenError, ConfigError) as exc:
+                self.counts["reload_failed"] += 1
+                log.error("reload failed, keeping the running config: %s", exc)
+                return
         self.earlier.update({k: v for k, v in self.pipeline.summary().items() if isinstance(v, int)})
         self.config = config
         self.pipeline.close()  # saved, so the new pipeline's calibration starts from what this one learned
         self.pipeline = Pipeline(config, output_channel=config.output_bus.channel)
-        if buses_changed:
+        if links is not None:
             self._close()
-            self._open()
+            self._use(links)
         else:
             self.bus_sink.encoder = self.pipeline.encoder
         self.counts["reloads"] += 1
