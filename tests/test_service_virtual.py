@@ -9,6 +9,7 @@ import pytest
 from canest.settings import BusConfig
 from canest.apps.demo import run_demo
 from canest.apps.replay import paced, play_messages, replay
+from canest.apps import service as service_module
 from canest.apps.service import Service
 from canest.errors import BusOpenError
 from canest.io.sinks import CallbackSink
@@ -198,30 +199,58 @@ def test_a_player_waiting_for_the_buses_returns_when_they_cannot_open(config):
     thread.join()
 
 
-def test_a_reload_whose_buses_do_not_open_keeps_the_running_ones(config, dlc_run):
-    """SIGHUP with a config naming a bus that does not open: the daemon logs it and runs on with its config and
-    buses (it had closed them first, and the open's error ended the daemon)."""
-    _, _, sim = dlc_run
-    live_config = config.with_buses(BusConfig("virtual", "reload-in"), BusConfig("virtual", "reload-out"))
-    broken = live_config.with_buses(BusConfig("no-such-interface", "x"), BusConfig("virtual", "reload-out"))
-    service = Service(live_config, reload_config=lambda: broken)
-    player_bus = can.Bus(interface="virtual", channel="reload-in")
+def reload_then_play(before, after, count: str, frames, input_channel: str, output_channel: str):
+    """Run a service on config ``before``, ask it to reload ``after``, wait until ``count`` (``reloads`` or
+    ``reload_failed``) is 1, play ``frames`` onto ``input_channel`` and wait until they are decoded; stop it.
+    Returns the service, whether it still ran after the reload and the first frame it sent on
+    ``output_channel`` (None if none)."""
+    service = Service(before, reload_config=lambda: after)
+    listener = can.Bus(interface="virtual", channel=output_channel)
+    player_bus = can.Bus(interface="virtual", channel=input_channel)
     thread = threading.Thread(target=service.run)
     thread.start()
+    def wait_for(done):
+        deadline = time.monotonic() + 10
+        while thread.is_alive() and not done() and time.monotonic() < deadline:
+            time.sleep(0.02)
+
     try:
         assert service.wait_until_listening(10)
         service.reload_requested.set()
-        deadline = time.monotonic() + 10
-        while service.counts["reload_failed"] == 0 and thread.is_alive() and time.monotonic() < deadline:
-            time.sleep(0.02)
-        frames = sim.frames[:300]
+        wait_for(lambda: service.counts[count] > 0)
         play_messages(frames, player_bus)
-        while service.summary()["decoded"] < len(frames) and thread.is_alive() and time.monotonic() < deadline:
-            time.sleep(0.02)
-        assert thread.is_alive(), "the reload ended the service"
+        wait_for(lambda: service.summary().get("decoded", 0) >= len(frames))
+        return service, thread.is_alive(), listener.recv(timeout=2.0)
     finally:
         service.stop()
         thread.join()
+        listener.shutdown()
         player_bus.shutdown()
+
+
+@pytest.mark.parametrize("one_handle", (False, True))
+def test_a_reload_whose_buses_do_not_open_keeps_the_running_ones(config, dlc_run, monkeypatch, one_handle):
+    """SIGHUP with a config naming a bus that does not open: the daemon logs it and runs on with its config and
+    buses (it had closed them first, and the open's error ended the daemon). ``one_handle``: as on an adapter
+    that takes one handle per channel, the running buses are closed first and opened again."""
+    if one_handle:
+        monkeypatch.setattr(service_module, "SHARED_CHANNEL_INTERFACES", ())
+    _, _, sim = dlc_run
+    live_config = config.with_buses(BusConfig("virtual", "reload-in"), BusConfig("virtual", "reload-out"))
+    broken = live_config.with_buses(BusConfig("no-such-interface", "x"), BusConfig("virtual", "reload-out"))
+    frames = sim.frames[:300]
+    service, running, sent = reload_then_play(live_config, broken, "reload_failed", frames, "reload-in", "reload-out")
+    assert running, "the reload ended the service"
     assert service.counts["reload_failed"] == 1 and service.config is live_config
-    assert service.summary()["decoded"] == len(frames)
+    assert service.summary()["decoded"] == len(frames) and sent is not None
+
+
+def test_a_reload_to_other_buses_moves_the_service_to_them(config, dlc_run):
+    """One bus for both ways, reloaded to an input and an output bus: the frames on the new input are decoded,
+    the estimates go out on the new output, and the old bus is closed."""
+    _, _, sim = dlc_run
+    shared = config.with_buses(BusConfig("virtual", "move-a"), BusConfig("virtual", "move-a"))
+    moved = config.with_buses(BusConfig("virtual", "move-in"), BusConfig("virtual", "move-out"))
+    service, running, sent = reload_then_play(shared, moved, "reloads", sim.frames[:300], "move-in", "move-out")
+    assert running and service.config is moved and service.summary()["decoded"] == 300 and sent is not None
+    assert "move-a" not in can.interfaces.virtual.channels

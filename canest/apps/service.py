@@ -22,9 +22,9 @@ What the loop guarantees:
   out, WATCHDOG=1 from the loop itself (a hung loop is restarted, an idle bus
   is not), STATUS= with input rate, tick rate and mode;
 - SIGTERM/SIGINT stop it cleanly; SIGHUP reloads the config (buses are
-  reopened only if their settings changed, the new ones opened before the
-  running ones close; a broken config, or one whose buses do not open, is
-  logged and the running one kept); SIGUSR1 logs the status now.
+  reopened only if their settings changed; a broken config, or one whose
+  buses do not open, is logged and the running one kept: :meth:`Service._new_links`);
+  SIGUSR1 logs the status now.
 """
 from __future__ import annotations
 
@@ -40,7 +40,7 @@ import numpy as np
 from canest.codec.decode import InputDecoder
 from canest.io.bus import BusLink
 from canest.io.sinks import BusSink
-from canest.errors import BusOpenError, ConfigError
+from canest.errors import BusOpenError, CanestError, ConfigError
 from canest.settings import Config
 from canest.apps.notify import Notifier
 from canest.pipeline import Pipeline, format_summary
@@ -51,6 +51,8 @@ TICK_MARGIN = 0.001  # s after a tick's time before it runs without a later fram
 STATUS_EVERY = 10.0  # s between status log lines
 NOTIFY_STATUS_EVERY = 1.0  # s between STATUS= updates to systemd
 LATENCY_WINDOW = 10_000  # send latencies kept for percentiles, cleared at every status line
+# interfaces whose handles on one channel open and close independently: a reload opens its buses beside them
+SHARED_CHANNEL_INTERFACES = ("socketcan", "virtual", "udp_multicast")
 
 
 class Service:
@@ -111,7 +113,7 @@ class Service:
             return inputs, inputs
         try:
             return inputs, BusLink(output_kwargs, "output", self.counts)
-        except BusOpenError:
+        except BaseException:
             inputs.close()
             raise
 
@@ -211,15 +213,15 @@ class Service:
             return
         try:
             config = self.reload_config()
-        except (ConfigError, OSError, ValueError) as exc:
+        except (CanestError, OSError, ValueError) as exc:
             self.counts["reload_failed"] += 1
             log.error("reload failed, keeping the running config: %s", exc)
             return
         buses_changed = (config.input_bus, config.output_bus) != (self.config.input_bus, self.config.output_bus)
         links = None
-        if buses_changed:  # opened before anything changes: buses that do not open leave all as it runs
+        if buses_changed:
             try:
-                links = self._links(config, InputDecoder(config).can_filters())
+                links = self._new_links(config)
             except (BusOpenError, ConfigError) as exc:
                 self.counts["reload_failed"] += 1
                 log.error("reload failed, keeping the running config: %s", exc)
@@ -235,6 +237,25 @@ class Service:
             self.bus_sink.encoder = self.pipeline.encoder
         self.counts["reloads"] += 1
         log.info("config reloaded from %s%s", config.path, "; buses reopened" if buses_changed else "")
+
+    def _new_links(self, config: Config) -> tuple:
+        """The reloaded ``config``'s links. Opened beside the running ones, so that buses which do not open change
+        nothing, where every channel they share with them is on an interface that takes several handles per
+        channel (:data:`SHARED_CHANNEL_INTERFACES`). An adapter that takes one (PCAN, Vector: a second open is
+        refused; slcan on Linux: it opens, and closing the first then closes the adapter's CAN channel) has the
+        running links closed first, and if the new ones do not open the running config's are opened again (if
+        those do not either, the daemon ends)."""
+        filters = InputDecoder(config).can_filters()
+        running = {_device(link.kwargs) for link in (self.inputs, self.outputs)}
+        wanted = {_device(bus.kwargs()) for bus in (config.input_bus, config.output_bus)}
+        if all(interface in SHARED_CHANNEL_INTERFACES for interface, _ in running & wanted):
+            return self._links(config, filters)
+        self._close()
+        try:
+            return self._links(config, filters)
+        except BusOpenError:
+            self._open()
+            raise
 
     def summary(self) -> dict:
         merged = Counter(self.earlier)
@@ -267,3 +288,8 @@ class _Schedule:
         self.previous = (summary, now)
         span = max(now - then, 1e-9)
         return {key: (summary.get(key, 0) - before.get(key, 0)) / span for key in ("frames", "ticks")}
+
+
+def _device(kwargs: dict) -> tuple:
+    """(interface, channel) of a bus's python-can arguments."""
+    return kwargs.get("interface"), str(kwargs.get("channel"))
