@@ -1,4 +1,5 @@
 """The live service in-process on python-can's virtual bus: same estimates as offline replay."""
+import dataclasses
 import threading
 import time
 
@@ -254,3 +255,15 @@ def test_a_reload_to_other_buses_moves_the_service_to_them(config, dlc_run):
     service, running, sent = reload_then_play(shared, moved, "reloads", sim.frames[:300], "move-in", "move-out")
     assert running and service.config is moved and service.summary()["decoded"] == 300 and sent is not None
     assert "move-a" not in can.interfaces.virtual.channels
+
+
+def test_a_reload_on_the_same_buses_receives_the_messages_the_new_config_maps(config, dlc_run):
+    """A config that maps more messages, reloaded on the same buses: the input bus passes them (it kept the
+    first config's filters: 36 of 400 frames decoded)."""
+    _, _, sim = dlc_run
+    full = config.with_buses(BusConfig("virtual", "remap-in"), BusConfig("virtual", "remap-out"))
+    first = sorted({spec.message for spec in full.signals.values()})[:1]
+    small = dataclasses.replace(full, signals={k: v for k, v in full.signals.items() if v.message in first},
+                                messages={k: v for k, v in full.messages.items() if k in first})
+    service, running, _ = reload_then_play(small, full, "reloads", sim.frames[:300], "remap-in", "remap-out")
+    assert running and service.config is full and service.summary()["decoded"] == 300

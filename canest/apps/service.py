@@ -233,7 +233,8 @@ class Service:
         if links is not None:
             self._close()
             self._use(links)
-        else:
+        else:  # the same buses: the input takes the messages the new config maps
+            self.inputs.set_filters(self.pipeline.decoder.can_filters())
             self.bus_sink.encoder = self.pipeline.encoder
         self.counts["reloads"] += 1
         log.info("config reloaded from %s%s", config.path, "; buses reopened" if buses_changed else "")

@@ -193,6 +193,12 @@ class BusLink:
             return msg
         return None
 
+    def set_filters(self, can_filters) -> None:
+        """Receive only what ``can_filters`` (python-can's) pass from now on, also after a reopen."""
+        self.open_extra["can_filters"] = can_filters
+        if self.bus is not None:
+            self.bus.set_filters(can_filters)
+
     def send(self, msg: can.Message) -> bool:
         if self.bus is None:
             self._reopen()
