@@ -214,18 +214,14 @@ class Service:
         try:
             config = self.reload_config()
         except (CanestError, OSError, ValueError) as exc:
-            self.counts["reload_failed"] += 1
-            log.error("reload failed, keeping the running config: %s", exc)
-            return
+            return self._reload_failed(exc)
         buses_changed = (config.input_bus, config.output_bus) != (self.config.input_bus, self.config.output_bus)
         links = None
         if buses_changed:
             try:
                 links = self._new_links(config)
             except (BusOpenError, ConfigError) as exc:
-                self.counts["reload_failed"] += 1
-                log.error("reload failed, keeping the running config: %s", exc)
-                return
+                return self._reload_failed(exc)
         self.earlier.update({k: v for k, v in self.pipeline.summary().items() if isinstance(v, int)})
         self.config = config
         self.pipeline.close()  # saved, so the new pipeline's calibration starts from what this one learned
@@ -238,6 +234,10 @@ class Service:
             self.bus_sink.encoder = self.pipeline.encoder
         self.counts["reloads"] += 1
         log.info("config reloaded from %s%s", config.path, "; buses reopened" if buses_changed else "")
+
+    def _reload_failed(self, exc: Exception) -> None:
+        self.counts["reload_failed"] += 1
+        log.error("reload failed, keeping the running config: %s", exc)
 
     def _new_links(self, config: Config) -> tuple:
         """The reloaded ``config``'s links. Opened beside the running ones, so that buses which do not open change

@@ -409,9 +409,9 @@ class Estimator:
         carried = self.covariance_has_tire_error and not self.low_speed  # the model's Q has the tire error
         # vx driven by the wheels' forces can leave the reference; one integrating ax shares its integration (ax and
         # r vy alike), and their difference tells nothing
-        lateral = self.judge.lateral_std(drift)
-        gap = 0.0 if self.integrates_ax else reference.disagreement(t, vx, lateral)
-        std = self.judge.widen(std, index, ratios, 0.0 if carried else beta_model_std, lateral,
+        lateral_std = self.judge.lateral_std(drift)
+        gap = 0.0 if self.integrates_ax else reference.disagreement(t, vx, lateral_std)
+        std = self.judge.widen(std, index, ratios, 0.0 if carried else beta_model_std, lateral_std,
                                self._gyro_noise(inputs), reference.integration_std(t),
                                self.integrates_ax and reference.wheels_t == t, gap)
         values = {
