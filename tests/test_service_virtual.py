@@ -66,6 +66,37 @@ def test_live_service_matches_offline_replay(config, dlc_run):
     assert summary["superseded"] < 0.05 * len(live)
 
 
+def test_a_stop_still_estimates_the_frames_the_bus_delivered(config, dlc_run):
+    """Stopped the moment the last of 10 s of frames is sent (far faster than real time, so most are still queued),
+    the service decodes every one and runs the ticks replay runs: a stop loses nothing received."""
+    log, _, _ = dlc_run
+    offline = []
+    replay(config, log, progress=False, on_estimate=offline.append)
+    frames = list(can.LogReader(log))
+    reached = [frames[0].timestamp]
+    live = []
+    service = Service(config.with_buses(BusConfig("virtual", "drain-in"), BusConfig("virtual", "drain-out")),
+                      sinks=[CallbackSink(live.append)], clock=lambda: reached[0])
+    player_bus = can.Bus(interface="virtual", channel="drain-in", preserve_timestamps=True)
+
+    def player():
+        if service.wait_until_listening(10):
+            for frame in frames:
+                reached[0] = frame.timestamp
+                player_bus.send(frame)
+        service.stop()
+
+    thread = threading.Thread(target=player)
+    thread.start()
+    summary = service.run()
+    thread.join()
+    player_bus.shutdown()
+    assert summary["decoded"] == len(frames)
+    assert len(offline) - 1 <= len(live) <= len(offline)
+    assert [e.t for e in live] == [e.t for e in offline[:len(live)]]
+    np.testing.assert_array_equal([e.values["beta"] for e in live], [e.values["beta"] for e in offline[:len(live)]])
+
+
 def test_demo_runs_and_reports_accuracy(config):
     scores = {s.state: s for s in run_demo(config, playback_speed=4.0, out=open("/dev/null", "w"))}
     assert scores["vx"].rmse < 0.2

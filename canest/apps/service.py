@@ -21,7 +21,8 @@ What the loop guarantees:
 - systemd: READY=1 once the buses are open and the first valid estimate is
   out, WATCHDOG=1 from the loop itself (a hung loop is restarted, an idle bus
   is not), STATUS= with input rate, tick rate and mode;
-- SIGTERM/SIGINT stop it cleanly; SIGHUP reloads the config (buses are
+- SIGTERM/SIGINT stop it cleanly: the frames the bus delivered before the stop are still decoded and
+  estimated (:meth:`Service._drain`), so a stop loses nothing received; SIGHUP reloads the config (buses are
   reopened only if their settings changed; a broken config, or one whose
   buses do not open, is logged and the running one kept: :meth:`Service._new_links`);
   SIGUSR1 logs the status now.
@@ -50,6 +51,7 @@ log = logging.getLogger("canest.apps.service")
 TICK_MARGIN = 0.001  # s after a tick's time before it runs without a later frame
 STATUS_EVERY = 10.0  # s between status log lines
 NOTIFY_STATUS_EVERY = 1.0  # s between STATUS= updates to systemd
+DRAIN_LIMIT = 100_000  # frames read after a stop at most (a bus that never falls silent: about 12 s of a 1 Mbit/s one)
 LATENCY_WINDOW = 10_000  # send latencies kept for percentiles, cleared at every status line
 # interfaces whose handles on one channel open and close independently: a reload opens its buses beside them
 SHARED_CHANNEL_INTERFACES = ("socketcan", "virtual", "udp_multicast")
@@ -166,11 +168,28 @@ class Service:
                     self._publish(estimates)
                 if estimates or msg is None:  # at most once a tick or an idle wait, not once a frame
                     self._housekeeping(schedule)
+            self._drain()
         finally:
             self.pipeline.close()  # the online calibration saved
             self._close()
             self.notifier.notify(STOPPING=1)
         return self.summary()
+
+    def _drain(self) -> None:
+        """Decode and estimate the frames still queued on the input bus at a stop, without waiting for more (at
+        most :data:`DRAIN_LIMIT`: a bus that never falls silent); the rest is logged as left unread."""
+        for read in range(DRAIN_LIMIT):
+            msg = self.inputs.recv(0.0)
+            if msg is None:
+                break
+            estimates = self.pipeline.feed(msg)
+            if estimates:
+                self._publish(estimates)
+        else:
+            log.warning("stopped with frames still arriving: %d read after the stop, the rest left unread", DRAIN_LIMIT)
+            return
+        if read:
+            log.info("stopping: %d frames queued at the stop decoded", read)
 
     def _wait(self, now: float) -> float:
         """Seconds to wait for a frame after ``now``: until the next tick is due, at most one tick period.
