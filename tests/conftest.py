@@ -7,6 +7,7 @@ must never pass with the real-vcan tests skipped.
 """
 import os
 import socket
+import threading
 from pathlib import Path
 
 import pytest
@@ -53,6 +54,22 @@ def ford_config(folder, edit=None) -> Path:
     path = Path(folder) / "ford.yaml"
     path.write_text(yaml.safe_dump(data, sort_keys=False))
     return path
+
+
+def run_service_playing(service, play) -> dict:
+    """Run ``service`` (in this thread) while another calls ``play()`` once its buses listen, then stops it; the
+    service's summary. If the buses never open, ``play`` is not called and the service's error is raised."""
+    def player():
+        if service.wait_until_listening(10):
+            play()
+        service.stop()
+
+    thread = threading.Thread(target=player)
+    thread.start()
+    try:
+        return service.run()
+    finally:
+        thread.join()
 
 
 def vcan_missing():

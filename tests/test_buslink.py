@@ -1,5 +1,4 @@
 """Output that cannot keep up: frames dropped and counted, the loop never blocks."""
-import threading
 import time
 
 import can
@@ -8,6 +7,7 @@ from canest.settings import BusConfig
 from canest.apps.replay import paced
 from canest.apps.service import Service
 from canest.io.sinks import CallbackSink
+from tests.conftest import run_service_playing
 
 
 def test_a_full_output_queue_drops_frames_without_blocking(config, dlc_run):
@@ -21,16 +21,10 @@ def test_a_full_output_queue_drops_frames_without_blocking(config, dlc_run):
     player = can.Bus(interface="virtual", channel="full-in")
 
     def play():
-        if not service.wait_until_listening(10):
-            return service.stop()
         for frame in paced(sim.frames[:1500]):
             player.send(frame)
-        service.stop()
 
-    thread = threading.Thread(target=play)
-    thread.start()
-    summary = service.run()
-    thread.join()
+    summary = run_service_playing(service, play)
     player.shutdown()
     stuck.shutdown()
     assert summary["sent"] == 5 and summary["send_dropped"] > 500  # the 5 that fit the queue, then drops

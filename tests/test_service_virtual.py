@@ -14,6 +14,7 @@ from canest.apps import service as service_module
 from canest.apps.service import Service
 from canest.errors import BusOpenError
 from canest.io.sinks import CallbackSink
+from tests.conftest import run_service_playing
 
 
 def test_live_service_matches_offline_replay(config, dlc_run):
@@ -34,19 +35,13 @@ def test_live_service_matches_offline_replay(config, dlc_run):
     listener = can.Bus(interface="virtual", channel="svc-out")
     player_bus = can.Bus(interface="virtual", channel="svc-in", preserve_timestamps=True)
 
-    def player():
-        if not service.wait_until_listening(10):
-            return service.stop()
+    def play():
         for frame in paced(frames):
             reached[0] = frame.timestamp
             player_bus.send(frame)
         time.sleep(0.2)
-        service.stop()
 
-    thread = threading.Thread(target=player)
-    thread.start()
-    summary = service.run()
-    thread.join()
+    summary = run_service_playing(service, play)
     received = []
     while (msg := listener.recv(timeout=0)) is not None:
         received.append(msg)
@@ -79,17 +74,12 @@ def test_a_stop_still_estimates_the_frames_the_bus_delivered(config, dlc_run):
                       sinks=[CallbackSink(live.append)], clock=lambda: reached[0])
     player_bus = can.Bus(interface="virtual", channel="drain-in", preserve_timestamps=True)
 
-    def player():
-        if service.wait_until_listening(10):
-            for frame in frames:
-                reached[0] = frame.timestamp
-                player_bus.send(frame)
-        service.stop()
+    def play():
+        for frame in frames:
+            reached[0] = frame.timestamp
+            player_bus.send(frame)
 
-    thread = threading.Thread(target=player)
-    thread.start()
-    summary = service.run()
-    thread.join()
+    summary = run_service_playing(service, play)
     player_bus.shutdown()
     assert summary["decoded"] == len(frames)
     assert len(offline) - 1 <= len(live) <= len(offline)
@@ -114,17 +104,11 @@ def test_idle_bus_keeps_ticking_and_reports_missing_inputs(config, dlc_run):
     player_bus = can.Bus(interface="virtual", channel="idle-in")
     first_second = [f for f in sim.frames if f.timestamp < sim.frames[0].timestamp + 1.0]
 
-    def player():
-        if not service.wait_until_listening(10):
-            return service.stop()
+    def play():
         play_messages(first_second, player_bus)
         time.sleep(1.0)  # the bus goes quiet
-        service.stop()
 
-    thread = threading.Thread(target=player)
-    thread.start()
-    service.run()
-    thread.join()
+    run_service_playing(service, play)
     player_bus.shutdown()
     assert len(live) > 170  # ~1 s of traffic plus ~0.9 s of idle ticks at 100 Hz
     assert live[-1].mode == "no_input"
@@ -188,20 +172,11 @@ def test_monitor_shows_estimates_and_health_of_a_running_service(config, dlc_run
     player_bus = can.Bus(interface="virtual", channel="mon-in")
     out = io.StringIO()
 
-    def player():
-        if not service.wait_until_listening(10):
-            return service.stop()
-        play_messages(sim.frames[:2500], player_bus)
-        service.stop()
-
-    threads = [threading.Thread(target=player),
-               threading.Thread(target=lambda: run_monitor(watcher, load_database(config.output_dbc, "test"),
-                                                           "virtual:mon-out", out, refresh=0.5, duration=3.5))]
-    for thread in threads:
-        thread.start()
-    service.run()
-    for thread in threads:
-        thread.join()
+    monitor = threading.Thread(target=lambda: run_monitor(watcher, load_database(config.output_dbc, "test"),
+                                                          "virtual:mon-out", out, refresh=0.5, duration=3.5))
+    monitor.start()
+    run_service_playing(service, lambda: play_messages(sim.frames[:2500], player_bus))
+    monitor.join()
     watcher.shutdown()
     player_bus.shutdown()
     last = out.getvalue().strip().split("\n\n")[-1]
