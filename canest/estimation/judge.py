@@ -203,7 +203,8 @@ class StateJudge:
         if cause != "valid":
             self.kinematic.reset()
             return cause
-        moving_as_measured = self.kinematic.inside(beta, *self._kinematic_inputs(inputs), vx, ay_density)
+        moving_as_measured = self.kinematic.inside(beta, *self._kinematic_inputs(inputs), vx, ay_density,
+                                                    self.sideslip_known)
         in_regime = self.regime is None or self.regime.inside(delta, vx, inputs.values["yaw_rate"])
         in_regime = in_regime and not at_limit_of_unbounded_friction
         return "valid" if moving_as_measured and in_regime else "model_regime"
