@@ -191,9 +191,9 @@ def test_the_sideslip_std_remembers_the_error_gathered_while_it_was_not_known(tm
                                                                                most_wrong):
     """The sideslip std is never below its mismatch with the kinematic sideslip. Its leaky memory (2 s) let the
     error a slide left fade while the car came back: jckf's sideslip returned valid 3.1 deg off with a std of 1.0
-    falling to 0.5 (16 % of its valid ticks wrong, NEES 3.8). The difference since the sideslip was last known is
-    not forgotten now; the leaky one stays beside it, which alone still holds what a sine's bit, coming and
-    going, would drop (without it dici-gfckf's drive was wrong on 18 % of its valid ticks)."""
+    falling to 0.5 (16 % of its valid ticks wrong, NEES 3.8). A second difference leaks only while the sideslip is
+    valid now; the leaky one stays beside it, which holds more where the bit comes and goes with a sine (without
+    it dici-gfckf's drive was wrong on 18 % of its valid ticks)."""
     result = honesty.run_case(CONFIG, [name], honesty.Case(maneuver, 80.0, mu, seed, car="drawn"), tmp_path)
     score = honesty.summarize("beta", result["sums"][name]["beta"])
     assert score.valid > 0.3 and score.vbw <= most_wrong and score.nees < 2.5, score
@@ -205,7 +205,7 @@ def test_the_lateral_forces_std_is_the_tire_curves_error_not_a_random_walks(tmp_
     with its stiffnesses off). It is now the stiffness uncertainty's share of each force, moving an axle's two
     wheels together, over a 300 N/sqrt(s) floor. The sideslip's covariance holds that error too, and the
     stiffness term of the other models added on top of it doubled it (NEES 0.35 on this drive, 1.17 once). The
-    sideslip's NEES is 0.46 since its std keeps the kinematic mismatch since it was last valid (1.14 before): this
+    sideslip's NEES is 0.46 since its std keeps the kinematic mismatch gathered while not valid (1.14 before): this
     car's ay bias (-0.21 m/s^2, two std of its draw) drifts that difference by 0.54 deg/s at 80 km/h, beyond the
     0.125 deg/s the biases are allowed (an allowance wide enough for it, 0.31 deg/s, let a slide's error through
     again: ``test_the_sideslip_std_remembers_the_error_gathered_while_it_was_not_known``, 8 % wrong)."""

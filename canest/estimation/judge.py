@@ -201,7 +201,7 @@ class StateJudge:
         saturated = any(inputs.saturated(n) for n in ("ay", "steering_wheel_angle", "yaw_rate"))
         cause = validity.judge(present, saturated, ratio)
         if cause != "valid":
-            self.kinematic.reset()
+            self.kinematic.restart()
             return cause
         moving_as_measured = self.kinematic.inside(beta, *self._kinematic_inputs(inputs), vx, ay_density,
                                                     self.sideslip_known)

@@ -286,16 +286,17 @@ class KinematicCheck:
     0.35 outran jckf's sideslip by 0.8 deg per window, inside the tolerance, until it was 2 deg off with a std
     of 0.62, flagged valid; in a lane change the difference swings both ways and cancels.
 
-    Beside it, the difference since the sideslip was last known (its bit set on the previous tick: ``known``)
-    is not forgotten while it is not: it is the error the model's sideslip gathered since, and what brings it
-    back is the two converging, which that difference shows as it shrinks; its biases' allowance grows at
-    ``KINEMATIC_BIAS_RATE`` over that time as it does (both leak as the first while known, where the allowance
-    rests at ``KINEMATIC_BIAS_ALLOWANCE``). The mismatch is the larger of the two. Leaking alone let the error
-    gathered in a slide fade while the car came back (a drawn car, step steer on 0.35: jckf's sideslip 3.1 deg
-    off, the slide 5.4 deg, when its bit returned with a std of 1.0 falling to 0.52 in 0.6 s, valid and wrong
-    on 61 ticks); that difference alone misses the error a sideslip already had when it was last known, which
-    the leaking one, never restarted, still holds in a sine whose bit comes and goes (dici-gfckf on a drawn car
-    with a soft rear: 20 % short of every peak, std 0.7 with it, 0.34 without, valid and wrong on 75 ticks).
+    Beside it, a second such difference, ``since_known``, leaks only while the sideslip is known (its bit set on
+    the previous tick: ``known``): while it is not, the error the model's sideslip gathers is not forgotten, and
+    what brings it back is the two converging, which that difference shows as it shrinks. Its biases' allowance
+    grows at ``KINEMATIC_BIAS_RATE`` while it does not leak (and leaks alike, resting at
+    ``KINEMATIC_BIAS_ALLOWANCE``, while known). A window restart (a channel missing, saturated or inconsistent:
+    :meth:`restart`) keeps it, a filter reset (:meth:`reset`) does not. The mismatch is the larger of the two.
+    The leaky one alone let the error gathered in a slide fade while the car came back (a drawn car, step steer
+    on 0.35: jckf's sideslip 3.1 deg off, the slide 5.4 deg, when its bit returned with a std of 1.0 falling to
+    0.52 in 0.6 s, valid and wrong on 61 ticks); ``since_known`` alone held less where the bit comes and goes
+    (its difference swings back with a sine and its allowance grows meanwhile: dici-gfckf on a drawn car with a
+    soft rear, 20 % short of every peak, std 0.34 instead of 0.7, valid and wrong on 75 ticks).
 
     ay's noise integrates into both: a vibrating ay (1.4 m/s^2, correlated over 15 ms) puts 0.45 deg of noise
     into the kinematic change per half second at 80 km/h, and the window's 0.5 deg failed a model that follows
@@ -312,15 +313,21 @@ class KinematicCheck:
         self.reset()
 
     def reset(self) -> None:
-        self.history.clear()
-        self.kinematic = 0.0
-        self.kinematic_noise = 0.0  # variance (rad^2) the ay noise put into ``kinematic`` since the reset
-        self.difference = 0.0
-        self.difference_noise = 0.0  # variance of that noise in the leaky ``difference``
+        """Forget everything (a filter reset: the model's sideslip starts anew)."""
         self.since_known = 0.0  # the difference, not leaking while the sideslip is not known
         self.since_known_noise = 0.0
         self.since_known_bias = KINEMATIC_BIAS_ALLOWANCE  # rad the biases may have put into ``since_known``
-        self.mismatch = 0.0
+        self.restart()
+
+    def restart(self) -> None:
+        """Start the window and the leaky difference anew (the channels were missing, saturated or inconsistent),
+        keeping ``since_known``: a slide the model missed is what makes a channel inconsistent."""
+        self.history.clear()
+        self.kinematic = 0.0
+        self.kinematic_noise = 0.0  # variance (rad^2) the ay noise put into ``kinematic`` since the restart
+        self.difference = 0.0
+        self.difference_noise = 0.0  # variance of that noise in the leaky ``difference``
+        self.mismatch = max(0.0, _beyond(self.since_known, self.since_known_bias, self.since_known_noise))
 
     def inside(self, beta: float, ay: float, yaw_rate: float, vx: float, ay_density: float = 0.0,
                known: bool = True) -> bool:
