@@ -60,9 +60,11 @@ def run_service_playing(service, play) -> dict:
     """Run ``service`` (in this thread) while another calls ``play()`` once its buses listen, then stops it; the
     service's summary. If the buses never open, ``play`` is not called and the service's error is raised."""
     def player():
-        if service.wait_until_listening(10):
-            play()
-        service.stop()
+        try:
+            if service.wait_until_listening(10):
+                play()
+        finally:
+            service.stop()
 
     thread = threading.Thread(target=player)
     thread.start()

@@ -21,8 +21,9 @@ What the loop guarantees:
 - systemd: READY=1 once the buses are open and the first valid estimate is
   out, WATCHDOG=1 from the loop itself (a hung loop is restarted, an idle bus
   is not), STATUS= with input rate, tick rate and mode;
-- SIGTERM/SIGINT stop it cleanly: the frames the bus delivered before the stop are still decoded and
-  estimated (:meth:`Service._drain`), so a stop loses nothing received; SIGHUP reloads the config (buses are
+- SIGTERM/SIGINT stop it cleanly: the frames queued on the input bus at the stop are still decoded and
+  estimated, for at most ``DRAIN_SECONDS`` (:meth:`Service._drain`; the systemd units allow 10 s to stop);
+  SIGHUP reloads the config (buses are
   reopened only if their settings changed; a broken config, or one whose
   buses do not open, is logged and the running one kept: :meth:`Service._new_links`);
   SIGUSR1 logs the status now.
@@ -51,7 +52,8 @@ log = logging.getLogger("canest.apps.service")
 TICK_MARGIN = 0.001  # s after a tick's time before it runs without a later frame
 STATUS_EVERY = 10.0  # s between status log lines
 NOTIFY_STATUS_EVERY = 1.0  # s between STATUS= updates to systemd
-DRAIN_LIMIT = 100_000  # frames read after a stop at most (a bus that never falls silent: about 12 s of a 1 Mbit/s one)
+DRAIN_SECONDS = 2.0  # s a stop reads on the frames queued before it, at most
+DRAIN_QUIET = 0.01  # s without a mapped frame that ends the drain (a shorter wait ends it at an unmapped one)
 LATENCY_WINDOW = 10_000  # send latencies kept for percentiles, cleared at every status line
 # interfaces whose handles on one channel open and close independently: a reload opens its buses beside them
 SHARED_CHANNEL_INTERFACES = ("socketcan", "virtual", "udp_multicast")
@@ -176,20 +178,28 @@ class Service:
         return self.summary()
 
     def _drain(self) -> None:
-        """Decode and estimate the frames still queued on the input bus at a stop, without waiting for more (at
-        most :data:`DRAIN_LIMIT`: a bus that never falls silent); the rest is logged as left unread."""
-        for read in range(DRAIN_LIMIT):
-            msg = self.inputs.recv(0.0)
-            if msg is None:
-                break
+        """Decode and estimate the frames queued on the input bus at a stop: those received before it (by their
+        receive stamps, on :attr:`clock`'s time base), until the first received after it or a quiet
+        :data:`DRAIN_QUIET` s, for at most :data:`DRAIN_SECONDS` (a machine that cannot keep up: then it says
+        so). Not on a lost bus (reopened at a stop it would only delay it). The wait is not zero: python-can
+        returns no frame from a zero wait that met a frame its software filters drop (virtual buses,
+        udp_multicast), with mapped frames still queued behind it."""
+        if not self.inputs.up:
+            return
+        stopped_at, deadline, read = self.clock(), time.monotonic() + DRAIN_SECONDS, 0
+        while (msg := self.inputs.recv(DRAIN_QUIET)) is not None:
+            if math.isfinite(msg.timestamp) and msg.timestamp > stopped_at:
+                break  # received after the stop: the bus goes on, the daemon does not
+            read += 1
             estimates = self.pipeline.feed(msg)
             if estimates:
                 self._publish(estimates)
-        else:
-            log.warning("stopped with frames still arriving: %d read after the stop, the rest left unread", DRAIN_LIMIT)
-            return
+            if time.monotonic() > deadline:
+                log.warning("stopping: %d frames queued at the stop read in %.0f s, the rest left unread", read,
+                            DRAIN_SECONDS)
+                return
         if read:
-            log.info("stopping: %d frames queued at the stop decoded", read)
+            log.info("stopping: %d frames queued at the stop read", read)
 
     def _wait(self, now: float) -> float:
         """Seconds to wait for a frame after ``now``: until the next tick is due, at most one tick period.

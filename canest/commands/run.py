@@ -22,10 +22,11 @@ process). In three terminals:
   canest monitor -i udp_multicast -c 239.74.163.3
   canest replay drive.log --realtime -i udp_multicast -c 239.74.163.2
 
-Signals: SIGINT/SIGTERM stop cleanly (frames already received are still
-estimated) and print where every input frame went; SIGHUP reloads the
-config (buses reopened only if their settings changed; a config that does
-not load, or whose buses do not open, is logged and the running one kept);
+Signals: SIGINT/SIGTERM stop cleanly (frames queued at the stop are still
+estimated, for at most 2 s) and print where every input frame went;
+SIGHUP reloads the config (buses reopened only if their settings changed; a
+config that does not load, or whose buses do not open, is logged and the
+running one kept);
 SIGUSR1 logs counters and loop latency now. Under systemd (Type=notify) it
 reports READY, WATCHDOG and STATUS; see tools/systemd/."""
 
