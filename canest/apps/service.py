@@ -178,28 +178,31 @@ class Service:
         return self.summary()
 
     def _drain(self) -> None:
-        """Decode and estimate the frames queued on the input bus at a stop: those received before it (by their
-        receive stamps, on :attr:`clock`'s time base), until the first received after it or a quiet
-        :data:`DRAIN_QUIET` s, for at most :data:`DRAIN_SECONDS` (a machine that cannot keep up: then it says
-        so). Not on a lost bus (reopened at a stop it would only delay it). The wait is not zero: python-can
-        returns no frame from a zero wait that met a frame its software filters drop (virtual buses,
-        udp_multicast), with mapped frames still queued behind it."""
+        """Decode and estimate the frames queued on the input bus at a stop, until a quiet :data:`DRAIN_QUIET` s,
+        for at most :data:`DRAIN_SECONDS` (then it says so); where the bus stamps frames when they arrive
+        (:attr:`BusLink.stamps_at_receive`, on :attr:`clock`'s time base), up to the first that arrived after
+        the stop (counted ``after_stop``), so a live bus, which never falls silent, does not hold the stop. Not
+        on a lost bus (reopened at a stop it would only delay it). The wait is not zero: python-can returns no
+        frame from a zero wait that met a frame its software filters drop (virtual buses, udp_multicast), with
+        mapped frames still queued behind it."""
         if not self.inputs.up:
             return
-        stopped_at, deadline, read = self.clock(), time.monotonic() + DRAIN_SECONDS, 0
+        stopped_at = self.clock() if self.inputs.stamps_at_receive else math.inf
+        deadline, read = time.monotonic() + DRAIN_SECONDS, 0
         while (msg := self.inputs.recv(DRAIN_QUIET)) is not None:
             if math.isfinite(msg.timestamp) and msg.timestamp > stopped_at:
-                break  # received after the stop: the bus goes on, the daemon does not
+                self.counts["after_stop"] += 1  # the bus goes on, the daemon does not
+                break
             read += 1
             estimates = self.pipeline.feed(msg)
             if estimates:
                 self._publish(estimates)
             if time.monotonic() > deadline:
-                log.warning("stopping: %d frames queued at the stop read in %.0f s, the rest left unread", read,
+                log.warning("stopping: %d frames read in %.0f s after the stop, the rest left unread", read,
                             DRAIN_SECONDS)
                 return
         if read:
-            log.info("stopping: %d frames queued at the stop read", read)
+            log.info("stopping: %d frames read after the stop", read)
 
     def _wait(self, now: float) -> float:
         """Seconds to wait for a frame after ``now``: until the next tick is due, at most one tick period.

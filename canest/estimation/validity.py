@@ -321,7 +321,8 @@ class KinematicCheck:
 
     def restart(self) -> None:
         """Start the window and the leaky difference anew (the channels were missing, saturated or inconsistent),
-        keeping ``since_known``: a slide the model missed is what makes a channel inconsistent."""
+        keeping ``since_known``, the error gathered before (a slide the model missed makes a channel inconsistent;
+        what the sideslip gathers while they are is not seen, nor the model's move across the gap)."""
         self.history.clear()
         self.kinematic = 0.0
         self.kinematic_noise = 0.0  # variance (rad^2) the ay noise put into ``kinematic`` since the restart

@@ -28,6 +28,7 @@ import logging
 import select
 import socket
 import struct
+import sys
 import time
 
 import can
@@ -147,6 +148,14 @@ class BusLink:
     @property
     def up(self) -> bool:
         return self.bus is not None
+
+    @property
+    def stamps_at_receive(self) -> bool:
+        """Its frames' timestamps tell when they reached this link's queue, on ``time.time``'s base: SocketCAN's
+        kernel stamps, python-can's virtual bus (stamped when sent) and udp_multicast on Linux (SO_TIMESTAMPNS).
+        Elsewhere (udp_multicast on macOS and Windows, slcan, ...) python-can stamps a frame when it is read."""
+        interface = self.kwargs.get("interface")
+        return interface in ("socketcan", "virtual") or (interface == "udp_multicast" and sys.platform == "linux")
 
     def _lost(self, exc: Exception) -> None:
         log.warning("%s bus %s lost: %s; reconnecting", self.role, self.kwargs.get("channel"), exc)
