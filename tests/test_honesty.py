@@ -183,32 +183,12 @@ def test_the_dual_filter_s_sideslip_is_not_valid_on_a_tire_at_a_friction_it_cann
     assert score.valid > 0.05 and score.vbw == 0.0 and score.max_error < 0.5, score
 
 
-@pytest.mark.parametrize("name, maneuver, mu, seed, most_wrong", [
-    ("jckf", "step", 0.35, 8, 0.01),  # rear x1.20: a 5.4 deg slide its sideslip followed to 2.7
-    ("dici-gfckf", "sine", 0.85, 0, 0.0),  # rear x0.77: every peak 20 % short, the sideslip's bit coming and going
-])
-def test_the_sideslip_std_remembers_the_error_gathered_while_it_was_not_known(tmp_path, name, maneuver, mu, seed,
-                                                                               most_wrong):
-    """The sideslip std is never below its mismatch with the kinematic sideslip. Its leaky memory (2 s) let the
-    error a slide left fade while the car came back: jckf's sideslip returned valid 3.1 deg off with a std of 1.0
-    falling to 0.5 (16 % of its valid ticks wrong, NEES 3.8). A second difference leaks only while the sideslip is
-    valid now; the leaky one stays beside it, which holds more where the bit comes and goes with a sine (without
-    it dici-gfckf's drive was wrong on 18 % of its valid ticks)."""
-    result = honesty.run_case(CONFIG, [name], honesty.Case(maneuver, 80.0, mu, seed, car="drawn"), tmp_path)
-    score = honesty.summarize("beta", result["sums"][name]["beta"])
-    assert score.valid > 0.3 and score.vbw <= most_wrong and score.nees < 2.5, score
-
-
 def test_the_lateral_forces_std_is_the_tire_curves_error_not_a_random_walks(tmp_path):
     """The tire-force model's forces relax towards the tire curve; their std was that of a 3000 N/sqrt(s) random
     walk against the relaxation (336 N on every wheel, NEES 0.08-0.61, mean 0.28, on this drive of a car drawn
     with its stiffnesses off). It is now the stiffness uncertainty's share of each force, moving an axle's two
     wheels together, over a 300 N/sqrt(s) floor. The sideslip's covariance holds that error too, and the
-    stiffness term of the other models added on top of it doubled it (NEES 0.35 on this drive, 1.17 once). The
-    sideslip's NEES is 0.46 since its std keeps the kinematic mismatch gathered while not valid (1.14 before): this
-    car's ay bias (-0.21 m/s^2, two std of its draw) drifts that difference by 0.54 deg/s at 80 km/h, beyond the
-    0.125 deg/s the biases are allowed (an allowance wide enough for it, 0.31 deg/s, let a slide's error through
-    again: ``test_the_sideslip_std_remembers_the_error_gathered_while_it_was_not_known``, 8 % wrong)."""
+    stiffness term of the other models added on top of it doubled it (NEES 0.35 on this drive, 1.17 once)."""
     case = honesty.Case("sine", 80.0, 0.85, 2, car="drawn")
     result = honesty.run_case(CONFIG, ["dici-gfckf"], case, tmp_path)
     scores = [honesty.summarize(f"fy_{wheel}", result["sums"]["dici-gfckf"][f"fy_{wheel}"])
@@ -216,7 +196,7 @@ def test_the_lateral_forces_std_is_the_tire_curves_error_not_a_random_walks(tmp_
     assert all(score.valid > 0.3 and score.vbw == 0.0 for score in scores), scores
     assert 0.4 <= sum(score.nees for score in scores) / len(scores) <= 2.0, scores
     sideslip = honesty.summarize("beta", result["sums"]["dici-gfckf"]["beta"])
-    assert sideslip.valid > 0.3 and sideslip.vbw == 0.0 and 0.4 <= sideslip.nees <= 2.0, sideslip
+    assert sideslip.valid > 0.3 and sideslip.vbw == 0.0 and 0.5 <= sideslip.nees <= 2.0, sideslip
 
 
 def test_a_friction_split_on_one_road_is_published_as_uncertain(tmp_path):

@@ -201,10 +201,9 @@ class StateJudge:
         saturated = any(inputs.saturated(n) for n in ("ay", "steering_wheel_angle", "yaw_rate"))
         cause = validity.judge(present, saturated, ratio)
         if cause != "valid":
-            self.kinematic.restart()
+            self.kinematic.reset()
             return cause
-        moving_as_measured = self.kinematic.inside(beta, *self._kinematic_inputs(inputs), vx, ay_density,
-                                                    self.sideslip_known)
+        moving_as_measured = self.kinematic.inside(beta, *self._kinematic_inputs(inputs), vx, ay_density)
         in_regime = self.regime is None or self.regime.inside(delta, vx, inputs.values["yaw_rate"])
         in_regime = in_regime and not at_limit_of_unbounded_friction
         return "valid" if moving_as_measured and in_regime else "model_regime"

@@ -148,7 +148,6 @@ KINEMATIC_WINDOW = 0.5  # s
 KINEMATIC_TOLERANCE = (math.radians(0.5), 0.25)  # rad plus a share of the kinematic change
 KINEMATIC_MEMORY = 2.0  # s, time constant of the sideslip's remembered mismatch with the kinematic one
 KINEMATIC_BIAS_ALLOWANCE = math.radians(0.25)  # rad of that mismatch the sensors' biases explain
-KINEMATIC_BIAS_RATE = KINEMATIC_BIAS_ALLOWANCE / KINEMATIC_MEMORY  # rad/s the biases drift it by, unremembered
 MODEL_ERROR_MEMORY = 1.0  # s, time constant of the leaky maximum the sideslip's model error is taken at
 KINEMATIC_NOISE_GATE = 2.0  # standard deviations of ay's integrated noise the kinematic change may be off by
 DRIFT_LIMIT = 0.5  # m/s of possible vx drift above which the car slides (vx "model_regime"; as VX_VALID_STD)
@@ -286,18 +285,6 @@ class KinematicCheck:
     0.35 outran jckf's sideslip by 0.8 deg per window, inside the tolerance, until it was 2 deg off with a std
     of 0.62, flagged valid; in a lane change the difference swings both ways and cancels.
 
-    Beside it, a second such difference, ``since_known``, leaks only while the sideslip is known (its bit set on
-    the previous tick: ``known``): while it is not, the error the model's sideslip gathers is not forgotten, and
-    what brings it back is the two converging, which that difference shows as it shrinks. Its biases' allowance
-    grows at ``KINEMATIC_BIAS_RATE`` while it does not leak (and leaks alike, resting at
-    ``KINEMATIC_BIAS_ALLOWANCE``, while known). A window restart (a channel missing, saturated or inconsistent:
-    :meth:`restart`) keeps it, a filter reset (:meth:`reset`) does not. The mismatch is the larger of the two.
-    The leaky one alone let the error gathered in a slide fade while the car came back (a drawn car, step steer
-    on 0.35: jckf's sideslip 3.1 deg off, the slide 5.4 deg, when its bit returned with a std of 1.0 falling to
-    0.52 in 0.6 s, valid and wrong on 61 ticks); ``since_known`` alone held less where the bit comes and goes
-    (its difference swings back with a sine and its allowance grows meanwhile: dici-gfckf on a drawn car with a
-    soft rear, 20 % short of every peak, std 0.34 instead of 0.7, valid and wrong on 75 ticks).
-
     ay's noise integrates into both: a vibrating ay (1.4 m/s^2, correlated over 15 ms) puts 0.45 deg of noise
     into the kinematic change per half second at 80 km/h, and the window's 0.5 deg failed a model that follows
     the car exactly. For an ay louder than configured (``ay_density`` 0 otherwise) the tolerance and the
@@ -313,41 +300,24 @@ class KinematicCheck:
         self.reset()
 
     def reset(self) -> None:
-        """Forget everything (a filter reset: the model's sideslip starts anew)."""
-        self.since_known = 0.0  # the difference, not leaking while the sideslip is not known
-        self.since_known_noise = 0.0
-        self.since_known_bias = KINEMATIC_BIAS_ALLOWANCE  # rad the biases may have put into ``since_known``
-        self.restart()
-
-    def restart(self) -> None:
-        """Start the window and the leaky difference anew (the channels were missing, saturated or inconsistent),
-        keeping ``since_known``, the error gathered before (a slide the model missed makes a channel inconsistent;
-        what the sideslip gathers while they are is not seen, nor the model's move across the gap)."""
         self.history.clear()
         self.kinematic = 0.0
-        self.kinematic_noise = 0.0  # variance (rad^2) the ay noise put into ``kinematic`` since the restart
+        self.kinematic_noise = 0.0  # variance (rad^2) the ay noise put into ``kinematic`` since the reset
         self.difference = 0.0
         self.difference_noise = 0.0  # variance of that noise in the leaky ``difference``
-        self.mismatch = max(0.0, _beyond(self.since_known, self.since_known_bias, self.since_known_noise))
+        self.mismatch = 0.0
 
-    def inside(self, beta: float, ay: float, yaw_rate: float, vx: float, ay_density: float = 0.0,
-               known: bool = True) -> bool:
+    def inside(self, beta: float, ay: float, yaw_rate: float, vx: float, ay_density: float = 0.0) -> bool:
         """The check on this tick's inputs; ``ay_density`` (m^2/s^3): ay's noise density as its samples show it
         (:attr:`canest.estimation.measured_noise.MeasuredNoise.density`), whose integral the tolerance and the
-        mismatch's allowance take at ``KINEMATIC_NOISE_GATE`` standard deviations; ``known``: the sideslip was
-        valid on the previous tick (else the mismatch is not forgotten)."""
+        mismatch's allowance take at ``KINEMATIC_NOISE_GATE`` standard deviations."""
         rate = (ay / vx - yaw_rate) * self.dt
         noise = ay_density * self.dt / (vx * vx)
         if self.history:
-            step = (beta - self.history[-1][0]) - rate
-            self.difference = self.leak * self.difference + step
+            self.difference = self.leak * self.difference + (beta - self.history[-1][0]) - rate
             self.difference_noise = self.leak * self.leak * self.difference_noise + noise
-            leak = self.leak if known else 1.0
-            self.since_known = leak * self.since_known + step
-            self.since_known_noise = leak * leak * self.since_known_noise + noise
-            self.since_known_bias = leak * self.since_known_bias + KINEMATIC_BIAS_RATE * self.dt
-            self.mismatch = max(0.0, _beyond(self.difference, KINEMATIC_BIAS_ALLOWANCE, self.difference_noise),
-                                _beyond(self.since_known, self.since_known_bias, self.since_known_noise))
+            allowance = math.hypot(KINEMATIC_BIAS_ALLOWANCE, KINEMATIC_NOISE_GATE * math.sqrt(self.difference_noise))
+            self.mismatch = max(0.0, abs(self.difference) - allowance)
         self.kinematic += rate
         self.kinematic_noise += noise
         self.history.append((beta, self.kinematic, self.kinematic_noise))
@@ -359,12 +329,6 @@ class KinematicCheck:
         absolute, relative = KINEMATIC_TOLERANCE
         gate = KINEMATIC_NOISE_GATE * math.sqrt(noise_now - noise_then)
         return abs((beta_now - beta_then) - change) <= math.hypot(absolute + relative * abs(change), gate)
-
-
-def _beyond(difference: float, bias: float, noise: float) -> float:
-    """How far ``difference`` (rad) is beyond what ``bias`` (rad) and ``KINEMATIC_NOISE_GATE`` std of ``noise``
-    (its variance, rad^2) explain, in quadrature."""
-    return abs(difference) - math.hypot(bias, KINEMATIC_NOISE_GATE * math.sqrt(noise))
 
 
 class LateralDrift:
