@@ -66,7 +66,7 @@ def test_a_stop_still_estimates_the_frames_the_bus_delivered(config, dlc_run, mo
     the service decodes every one and runs the ticks replay runs. A frame of an ID the config does not map sits
     half way: the virtual bus's software filter drops it, and a drain that stopped at the first empty read stopped
     there (2235 of 4470 decoded). Frames the bus goes on delivering after the stop are not read (a live bus never
-    falls silent: the stop would wait for good)."""
+    falls silent: the stop would wait out DRAIN_SECONDS, raised here so a busy machine cannot end the drain)."""
     log, _, _ = dlc_run
     offline = []
     replay(config, log, progress=False, on_estimate=offline.append)
