@@ -151,7 +151,8 @@ class SingleTrackFit:
     def predict(self, drive: Drive, bank_index: int, theta: np.ndarray):
         """Predicted (yaw rate, ay, dvy/dt), each (ticks, columns), for parameter columns ``theta`` (n, columns).
 
-        The model is linear in its state ``(vy, r, Ff, Fr)`` with the inputs held over a tick, so each tick's RK4
+        The model is linear in its state ``(vy, r, Ff, Fr)`` with the inputs constant over a tick's step (the mean
+        of its two ends, :func:`_over_step`), so each tick's RK4
         step is the matrix ``Phi = sum (A dt)^j / j!`` (j to 4) and ``Gamma = dt sum (A dt)^j / (j + 1)!`` (j to 3)
         on the constant input: built for all ticks at once, then one matrix product per tick."""
         p = self.p
@@ -163,13 +164,14 @@ class SingleTrackFit:
         ticks, columns = delta.shape
         zero, one = np.zeros((ticks, columns)), np.ones((ticks, columns))
         cf_t, cr_t = cf * one, cr * one
+        delta_step, vx_step = _over_step(delta, drive.starts), _over_step(vx, drive.starts)
         matrix = np.stack([
-            np.stack([zero, -vx, one / m, one / m], -1),
+            np.stack([zero, -vx_step, one / m, one / m], -1),
             np.stack([zero, zero, a / iz * one, -b / iz * one], -1),
-            np.stack([-cf_t / sigma, -cf_t * a / sigma, -vx / sigma, zero], -1),
-            np.stack([-cr_t / sigma, cr_t * b / sigma, zero, -vx / sigma], -1)], -2) * STEP  # (ticks, columns, 4, 4)
+            np.stack([-cf_t / sigma, -cf_t * a / sigma, -vx_step / sigma, zero], -1),
+            np.stack([-cr_t / sigma, cr_t * b / sigma, zero, -vx_step / sigma], -1)], -2) * STEP  # (ticks, columns, 4, 4)
         gravity = GRAVITY * np.sin(theta[7 + bank_index]) * one
-        constant = np.stack([gravity, zero, cf * vx * delta / sigma, zero], -1)
+        constant = np.stack([gravity, zero, cf * vx_step * delta_step / sigma, zero], -1)
         power, phi, gamma = np.broadcast_to(np.eye(4), matrix.shape), np.eye(4) + 0.0 * matrix, 0.0 * matrix
         for j in range(1, 5):
             gamma = gamma + power / math.factorial(j)
@@ -217,6 +219,16 @@ class SingleTrackFit:
         columns = np.column_stack([x, x[:, None] + np.diag(steps)])
         values = self.residuals(columns)
         return (values[:, 1:] - values[:, :1]) / steps
+
+
+def _over_step(values: np.ndarray, starts: np.ndarray) -> np.ndarray:
+    """Each tick's input over its step to the next tick, (ticks, columns): the mean of the step's two ends (a
+    sampled input moves between its samples; held at the first, the model's steering ran half a step, 10 ms,
+    behind the yaw rate and ay it is compared with). The last tick of a stretch keeps its own value."""
+    following = np.roll(values, -1, axis=0)
+    last = np.roll(starts, -1)
+    last[-1] = True
+    return np.where(last[:, None], values, 0.5 * (values + following))
 
 
 def _widening(errors: np.ndarray) -> float:
