@@ -91,8 +91,9 @@ MIN_EVIDENCE = 30.0  # s of excited blocks before a parameter counts as converge
 APPLY_EVIDENCE = 10.0  # s of excited blocks before a parameter is applied (the gyro bias: once converged)
 REOPEN_AFTER = 3  # window fits gated in a row before the stiffnesses are relearned
 # std of a window fit's parameter beyond its interval: the linear model's error, measured over 4 windows of each of
-# 3 roads (seeds 3 and 7, flat and banked 3 deg): the linear tires read the plant's 2-3 % soft; the offsets,
-# ratio and speed scattered 1.5-3 of their own std about the truth
+# 3 roads (seeds 3 and 7, flat and banked 3 deg): the linear tires read the plant's 2-3 % soft (with the fit's
+# steering held over each step; taken over the step, the rear reads 1-8 % soft, README "Online calibration"); the
+# offsets, ratio and speed scattered 1.5-3 of their own std about the truth
 FIT_FLOOR = {"front": 0.03, "rear": 0.03, "ratio": 0.02, "steering_offset": math.radians(0.15),
              "gyro_bias": math.radians(0.04), "ay_bias": 0.015, "speed": 0.002}
 NOISE = {"kinematic": 0.1, "steering": math.radians(0.5), "longitudinal": 0.1,  # per block, widened for the

@@ -165,11 +165,11 @@ class SingleTrackFit:
         zero, one = np.zeros((ticks, columns)), np.ones((ticks, columns))
         cf_t, cr_t = cf * one, cr * one
         delta_step, vx_step = _over_step(delta, drive.starts), _over_step(vx, drive.starts)
-        matrix = np.stack([
+        matrix = np.stack([  # (ticks, columns, 4, 4)
             np.stack([zero, -vx_step, one / m, one / m], -1),
             np.stack([zero, zero, a / iz * one, -b / iz * one], -1),
             np.stack([-cf_t / sigma, -cf_t * a / sigma, -vx_step / sigma, zero], -1),
-            np.stack([-cr_t / sigma, cr_t * b / sigma, zero, -vx_step / sigma], -1)], -2) * STEP  # (ticks, columns, 4, 4)
+            np.stack([-cr_t / sigma, cr_t * b / sigma, zero, -vx_step / sigma], -1)], -2) * STEP
         gravity = GRAVITY * np.sin(theta[7 + bank_index]) * one
         constant = np.stack([gravity, zero, cf * vx_step * delta_step / sigma, zero], -1)
         power, phi, gamma = np.broadcast_to(np.eye(4), matrix.shape), np.eye(4) + 0.0 * matrix, 0.0 * matrix
