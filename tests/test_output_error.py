@@ -55,3 +55,24 @@ def test_the_fits_model_takes_the_steering_over_each_step_not_held_at_its_start(
     yaw_rate = model.predict(drive, 0, truth)[0][:, 0]
     reference = reference_yaw_rate(vehicle, times)
     assert np.max(np.abs(yaw_rate - reference)) < 2e-3 * np.max(np.abs(reference))
+
+
+def test_a_stretch_never_takes_the_next_stretchs_inputs():
+    """Stretches of usable driving are joined in one array, and the step from one stretch's last tick to the next
+    one's first is no step of the car's: the joined prediction is each stretch's alone (each starts from its own
+    samples)."""
+    vehicle = load_config(CONFIG).vehicle
+    times = np.arange(0.0, 4.0, STEP)
+    speed = SPEED + 3.0 * np.sin(times)
+    first = Drive("first", times, steering(times), np.zeros_like(times), np.zeros_like(times), speed,
+                  np.arange(len(times)) == 0)
+    second = Drive("second", times + 10.0, -steering(times + 0.3), np.zeros_like(times), np.zeros_like(times),
+                   speed[::-1], np.arange(len(times)) == 0)
+    joined = Drive("joined", *(np.concatenate([getattr(first, name), getattr(second, name)])
+                               for name in ("t", "steering_wheel_angle", "yaw_rate", "ay", "wheel_speed", "starts")))
+    theta = np.array([[0.8, 1.0], [1.2, 1.0], [1.0, 1.1], [0.01, 0.0], [0.0, 0.002], [0.1, 0.0], [1.02, 1.0],
+                      [0.0, 0.02]])
+    predicted = [np.concatenate(parts) for parts in zip(SingleTrackFit(vehicle, [first]).predict(first, 0, theta),
+                                                        SingleTrackFit(vehicle, [second]).predict(second, 0, theta))]
+    for alone, together in zip(predicted, SingleTrackFit(vehicle, [joined]).predict(joined, 0, theta)):
+        np.testing.assert_allclose(together, alone, rtol=0, atol=1e-12)

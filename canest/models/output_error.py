@@ -164,7 +164,7 @@ class SingleTrackFit:
         ticks, columns = delta.shape
         zero, one = np.zeros((ticks, columns)), np.ones((ticks, columns))
         cf_t, cr_t = cf * one, cr * one
-        delta_step, vx_step = _over_step(delta, drive.starts), _over_step(vx, drive.starts)
+        delta_step, vx_step = _over_step(delta), _over_step(vx)
         matrix = np.stack([  # (ticks, columns, 4, 4)
             np.stack([zero, -vx_step, one / m, one / m], -1),
             np.stack([zero, zero, a / iz * one, -b / iz * one], -1),
@@ -221,14 +221,13 @@ class SingleTrackFit:
         return (values[:, 1:] - values[:, :1]) / steps
 
 
-def _over_step(values: np.ndarray, starts: np.ndarray) -> np.ndarray:
+def _over_step(values: np.ndarray) -> np.ndarray:
     """Each tick's input over its step to the next tick, (ticks, columns): the mean of the step's two ends (a
     sampled input moves between its samples; held at the first, the model's steering ran half a step, 10 ms,
-    behind the yaw rate and ay it is compared with). The last tick of a stretch keeps its own value."""
-    following = np.roll(values, -1, axis=0)
-    last = np.roll(starts, -1)
-    last[-1] = True
-    return np.where(last[:, None], values, 0.5 * (values + following))
+    behind the yaw rate and ay it is compared with). The last tick keeps its own value; the step from a stretch's
+    last tick is never used (the next tick starts its stretch from its own samples)."""
+    following = np.concatenate([values[1:], values[-1:]])
+    return 0.5 * (values + following)
 
 
 def _widening(errors: np.ndarray) -> float:
