@@ -58,6 +58,7 @@ class Pipeline:
         if self.calibration.enabled:
             self.estimator.use_stiffness(*self.calibration.stiffness)
             self.estimator.use_kinematic_offsets(*self.calibration.kinematic_offsets)
+            self.estimator.use_correction_std(*self.calibration.correction_std)
         estimate = self.estimator.step(sample)
         if self.calibration.enabled:
             estimate.calibration = self.calibration.report()

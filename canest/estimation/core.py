@@ -157,6 +157,11 @@ class Estimator:
         the gyro bias's until it converged), for the kinematic checks (:meth:`StateJudge.use_kinematic_offsets`)."""
         self.judge.use_kinematic_offsets(ay, yaw_rate)
 
+    def use_correction_std(self, speed: float, gyro_bias: float) -> None:
+        """The error of the online calibration's applied wheel-speed scale (relative) and gyro bias (rad/s), which
+        the published vx and yaw rate carry (:meth:`StateJudge.use_correction_std`)."""
+        self.judge.use_correction_std(speed, gyro_bias)
+
     def reset(self) -> None:
         """Forget the state: the next tick with inputs initializes a new filter."""
         self.filter = None
@@ -413,7 +418,7 @@ class Estimator:
         gap = 0.0 if self.integrates_ax else reference.disagreement(t, vx, lateral_std)
         std = self.judge.widen(std, index, ratios, 0.0 if carried else beta_model_std, lateral_std,
                                self._gyro_noise(inputs), reference.integration_std(t),
-                               self.integrates_ax and reference.wheels_t == t, gap)
+                               self.integrates_ax and reference.wheels_t == t, gap, vx)
         values = {
             "vx": vx, "vy": vx * math.tan(beta), "beta": beta, "yaw_rate": x[self.yaw],
             "vx_std": std[self.vx], "vy_std": math.hypot(vx * std[self.beta] / math.cos(beta) ** 2,

@@ -39,6 +39,7 @@ class StateJudge:
         # |v r| (m/s^2), or a tire curve's rear slip angle (rad), held (:meth:`sideslip_model_std`)
         self.excitation = validity.FadingMaximum(dt, validity.MODEL_ERROR_MEMORY)
         self.kinematic_offsets = (0.0, 0.0)  # ay, yaw rate (:meth:`use_kinematic_offsets`)
+        self.correction_std = (0.0, 0.0)  # speed scale, gyro bias (:meth:`use_correction_std`)
         self.gyros = [n for n in validity.OBSERVED_BY["yaw_rate"] if n in model.measurement_names]  # the measured ones
         self.linear_tires = getattr(model, "linear_tires", False)
         self.sources = [SOURCES.get(name, (name,))[0] for name in model.measurement_names]  # input behind each channel
@@ -126,6 +127,11 @@ class StateJudge:
         has learned (the online calibration's, not applied to the inputs): the kinematic checks take them out."""
         self.kinematic_offsets = (ay, yaw_rate)
 
+    def use_correction_std(self, speed: float, gyro_bias: float) -> None:
+        """The error of the wheel-speed scale (relative) and the gyro bias (rad/s) the online calibration applied to
+        the inputs (0: none applied), which :meth:`widen` adds to vx's and the yaw rate's std."""
+        self.correction_std = (speed, gyro_bias)
+
     def _kinematic_inputs(self, inputs) -> tuple:
         """ay and yaw rate as the kinematic identity holds them: the inputs less :meth:`use_kinematic_offsets`'."""
         ay_offset, yaw_offset = self.kinematic_offsets
@@ -133,7 +139,7 @@ class StateJudge:
 
     def widen(self, std: np.ndarray, index: dict, ratios: dict, beta_model_std: float,
               lateral: float = 0.0, gyro_noise: float = 1.0, walk: float = 0.0, walk_apart: bool = False,
-              reference_gap: float = 0.0) -> np.ndarray:
+              reference_gap: float = 0.0, vx: float = 0.0) -> np.ndarray:
         """The published std: each state's by its channels' consistency, the yaw rate's also by its gyro's noise as
         measured over configured (``gyro_noise``, :mod:`canest.estimation.measured_noise`; never narrowed by it), vx
         with its lateral drift (``lateral``, :meth:`lateral_std`) and the reference speed's random walk, the error every
@@ -143,12 +149,17 @@ class StateJudge:
         ``reference_gap`` (its distance from the reference beyond the reference's std, ``ReferenceSpeed.disagreement``),
         a leaky maximum fading over ``validity.HOLD`` s (it alternates tick by tick while vx and the reference cross:
         vx's bit flickered between valid and uncertain); sideslip with its model error (``beta_model_std``,
-        :meth:`sideslip_model_std`), and never below its last mismatch with the kinematic sideslip change."""
+        :meth:`sideslip_model_std`), and never below its last mismatch with the kinematic sideslip change. vx (its
+        value ``vx``) and the yaw rate add the error of the applied wheel-speed scale and gyro bias in quadrature
+        (:meth:`use_correction_std`)."""
         std = std.copy()
-        std[index["yaw_rate"]] *= validity.inflation(ratios["yaw_rate"]) * max(gyro_noise, 1.0)
-        vx = math.hypot(std[index["vx"]] * validity.inflation(ratios["vx"]), lateral)
-        std[index["vx"]] = max(math.hypot(vx, walk) if walk_apart else max(vx, walk),
-                               self.reference_gap.update(reference_gap))
+        speed_std, gyro_bias_std = self.correction_std
+        yaw_rate = std[index["yaw_rate"]] * validity.inflation(ratios["yaw_rate"]) * max(gyro_noise, 1.0)
+        std[index["yaw_rate"]] = math.hypot(yaw_rate, gyro_bias_std)
+        vx_std = math.hypot(std[index["vx"]] * validity.inflation(ratios["vx"]), lateral)
+        vx_std = max(math.hypot(vx_std, walk) if walk_apart else max(vx_std, walk),
+                     self.reference_gap.update(reference_gap))
+        std[index["vx"]] = math.hypot(vx_std, abs(vx) * speed_std)
         std[index["beta"]] = max(math.hypot(std[index["beta"]] * validity.inflation(ratios["beta"]), beta_model_std),
                                  self.kinematic.mismatch)
         return std

@@ -78,7 +78,11 @@ Published standard deviations get these terms beyond the filter's covariance:
   launch on 0.35, ran its vx 1.3-1.9 m/s ahead with a std of 0.23, valid,
   while the reference was 0.4 off with a std of 0.3). A model integrating ax
   shares the reference's integration, ax and ``r vy`` alike: their
-  difference tells nothing there.
+  difference tells nothing there;
+- vx and the yaw rate carry the error of the wheel-speed scale and the gyro
+  bias the online calibration applied to the inputs, in quadrature
+  (:attr:`canest.estimation.online_calibration.OnlineCalibration.correction_std`):
+  a scale every tick shares, which the reference speed shares too.
 
 Sideslip also needs the model inside its valid regime. A model with fixed
 tire friction (the single-track model's linear tires, the tire-force
