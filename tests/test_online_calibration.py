@@ -178,7 +178,8 @@ def test_applied_after_ten_seconds_of_evidence_before_convergence_then_rate_limi
 def test_vx_and_the_yaw_rate_carry_the_error_of_the_applied_corrections(learned, drive):
     """From the first tick the wheel-speed scale is applied, vx's std holds ``|vx|`` times its error (its learned std
     and the distance the applied value has still to follow, in quadrature), and the yaw rate's the gyro bias's once
-    that is applied: the scale is one error every tick shares, which no consistency test sees. Before, vx was within
+    that is applied (within 2 std on 97.7 % of its valid ticks after it, 94.6 % before): the scale is one error every
+    tick shares, which no consistency test sees. Before, vx was within
     2 std on 64 % of the valid ticks after the scale was applied (NEES 9.5, valid but wrong 2.3 %; now 100 %, 0.88)."""
     pipeline, history, estimates = learned
     speed, gyro = NAMES.index("speed"), NAMES.index("gyro_bias")
@@ -192,9 +193,11 @@ def test_vx_and_the_yaw_rate_carry_the_error_of_the_applied_corrections(learned,
     vx_truth = np.interp([e.t for e in after], drive.truth["t"], drive.truth["vx"])
     error = np.abs(np.array([e.values["vx"] for e in after]) - vx_truth)
     assert np.mean(error < 2.0 * np.array([e.values["vx_std"] for e in after])) > 0.9
-    gyro_applied = [e for e in estimates if e.calibration["calib_gyro_bias_applied"] != 0.0]
-    assert gyro_applied  # the gyro bias converged on this road
-    assert all(e.values["yaw_rate_std"] >= e.calibration["calib_gyro_bias_std"] for e in gyro_applied)
+    gyro_applied = [e for e in estimates if e.calibration["calib_gyro_bias_applied"] != 0.0 and e.valid["yaw_rate"]]
+    assert len(gyro_applied) > 1000  # the gyro bias converged on this road
+    yaw_truth = np.interp([e.t for e in gyro_applied], drive.truth["t"], drive.truth["yaw_rate"])
+    yaw_error = np.abs(np.array([e.values["yaw_rate"] for e in gyro_applied]) - yaw_truth)
+    assert np.mean(yaw_error < 2.0 * np.array([e.values["yaw_rate_std"] for e in gyro_applied])) > 0.96  # was 0.946
 
 
 def test_the_steering_and_lateral_offsets_are_learned_but_never_applied(config):

@@ -154,12 +154,12 @@ class StateJudge:
         (:meth:`use_correction_std`)."""
         std = std.copy()
         speed_std, gyro_bias_std = self.correction_std
-        yaw_rate = std[index["yaw_rate"]] * validity.inflation(ratios["yaw_rate"]) * max(gyro_noise, 1.0)
-        std[index["yaw_rate"]] = math.hypot(yaw_rate, gyro_bias_std)
+        yaw_rate = std[index["yaw_rate"]] * (validity.inflation(ratios["yaw_rate"]) * max(gyro_noise, 1.0))
+        std[index["yaw_rate"]] = math.hypot(yaw_rate, gyro_bias_std) if gyro_bias_std else yaw_rate
         vx_std = math.hypot(std[index["vx"]] * validity.inflation(ratios["vx"]), lateral)
         vx_std = max(math.hypot(vx_std, walk) if walk_apart else max(vx_std, walk),
                      self.reference_gap.update(reference_gap))
-        std[index["vx"]] = math.hypot(vx_std, abs(vx) * speed_std)
+        std[index["vx"]] = math.hypot(vx_std, abs(vx) * speed_std) if speed_std else vx_std
         std[index["beta"]] = max(math.hypot(std[index["beta"]] * validity.inflation(ratios["beta"]), beta_model_std),
                                  self.kinematic.mismatch)
         return std

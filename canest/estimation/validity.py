@@ -82,7 +82,8 @@ Published standard deviations get these terms beyond the filter's covariance:
 - vx and the yaw rate carry the error of the wheel-speed scale and the gyro
   bias the online calibration applied to the inputs, in quadrature
   (:attr:`canest.estimation.online_calibration.OnlineCalibration.correction_std`):
-  a scale every tick shares, which the reference speed shares too.
+  one error every tick shares, which no consistency test sees (the reference
+  speed takes the same scaled wheels; the filter's prior follows the gyro).
 
 Sideslip also needs the model inside its valid regime. A model with fixed
 tire friction (the single-track model's linear tires, the tire-force
