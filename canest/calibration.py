@@ -7,7 +7,7 @@ all of them. What each parameter means: :mod:`canest.models.output_error`.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -31,6 +31,14 @@ SHARED = (
     Parameter("speed", 1.0, 0.01, 0.8, 1.25),
 )
 BANK = Parameter("bank", 0.0, math.radians(0.5), -math.radians(15.0), math.radians(15.0))
+STIFFNESSES = ("front", "rear")
+CONFIDENCE = 1.96  # a 95 % two-sided interval in standard deviations
+# relative, 1 std: how far the linear tires' cornering stiffness read from driving is from the tires' small-slip
+# stiffness, the same in every window and every log, so no amount of driving averages it away (the curve, load
+# transfer on load-sensitive tires, the tires' lag). Measured on the simulator (README "Online calibration"): three
+# 60 s roads fitted together read the front 3.0 %, the rear 4.9 % soft; ten roads online after 60 s the rear 1-8 %
+# soft (RMS 4.4 %), the front within 4 %; without it the rear's error was 1.7 (60 s) to 2.5 (120 s) of its std
+STIFFNESS_MODEL_ERROR = 0.05
 
 
 @dataclass
@@ -47,3 +55,12 @@ class Fit:
 
     def half_width(self, name: str) -> float:
         return float(self.half_widths[self.names.index(name)])
+
+    def with_model_error(self) -> Fit:
+        """A copy whose stiffnesses' intervals also hold :data:`STIFFNESS_MODEL_ERROR`, in quadrature: what the
+        drives' residuals cannot show (a fit's intervals shrink with driving; the linear tires' error does not)."""
+        half_widths = self.half_widths.copy()
+        for name in STIFFNESSES:
+            i = self.names.index(name)
+            half_widths[i] = math.hypot(half_widths[i], CONFIDENCE * STIFFNESS_MODEL_ERROR * self.values[i])
+        return replace(self, half_widths=half_widths)

@@ -69,6 +69,7 @@ TIRE = {
 }
 
 STIFFNESS_UNCERTAINTY = Range(0.0, 1.0)  # vehicle.cornering_stiffness_uncertainty, relative (optional)
+RADIUS_UNCERTAINTY = Range(0.0, 0.2)  # vehicle.wheel_radius_uncertainty, relative (optional): no tire is 20 % off
 ATTITUDE = {  # vehicle (optional, 0 by default): the body's tilt the accelerometers read, 15: more than a soft SUV's
     "accelerometer_roll_gradient": Range(0.0, 15.0, "deg/g"),
     "accelerometer_pitch_gradient": Range(0.0, 15.0, "deg/g"),
@@ -87,6 +88,7 @@ ESTIMATOR = {
     "timeout_cycles": Range(1.0, 1000.0),
     "friction_excitation": Range(1.0, 1e6, "N"),
     "friction_correlation": Range(0.0, 1.0, high_open=True),
+    "gyro_bias_std": Range(0.0, 0.1, "rad/s"),  # 0.1 rad/s: 5.7 deg/s, no working yaw-rate sensor's bias
 }
 
 NOISE = Range(1e-9, 1e6)  # process noise, measurement noise and initial standard deviations, in their SI units

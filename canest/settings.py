@@ -114,6 +114,9 @@ class EstimatorConfig:
     timeout_cycles: float = 5.0
     friction_excitation: float = 1500.0  # N per unit mu: |dF/dmu| at mu - 3 std that makes a wheel excited
     friction_correlation: float = 0.9  # prior correlation of the four wheels' frictions (same road)
+    # rad/s, 1 std: the gyro's bias beyond what measurement_noise.yaw_rate admits (noise the filter averages, not an
+    # offset every tick shares); the published yaw rate carries it until the online calibration applies its own
+    gyro_bias_std: float = 0.0
     latency_compensation: bool = False
     online_calibration: bool = True  # learn sensor biases and parameters while driving (estimation.online_calibration)
     state_file: str | None = None  # where the online calibration is saved and reloaded from; None: not saved

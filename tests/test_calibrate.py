@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 from canest.models.output_error import calibrate
-from canest.apps.calibrated_config import write_calibrated
+from canest.apps.calibrated_config import RADIUS_DRIFT, write_calibrated
 from canest.apps.drive_signals import read_drive
 from canest.config import load_config
 from canest.sim.mismatch import PlantMismatch, true_fit, true_vehicle
@@ -80,6 +80,9 @@ def test_recovers_each_parameter_of_the_wrong_config(calibrated):
         true, got = getattr(truth, key), getattr(fitted.vehicle, key)
         print(f"{key}: true {true:.6g}, calibrated {got:.6g} ({100 * (got / true - 1):+.1f} %)")
         assert abs(got / true - 1.0) < 0.10, key
+    for key in ("cornering_stiffness_front", "cornering_stiffness_rear"):
+        _, _, value, half, _ = next(line.split() for line in stdout.splitlines() if line.split()[:1] == [key])
+        assert abs(float(value) - getattr(truth, key)) < float(half.removeprefix("+-")), key  # the tires' error
     offsets = {"steering_wheel_angle": (math.radians(1.5), math.radians(0.2)),
                "yaw_rate": (math.radians(0.5), math.radians(0.05)), "ay": (0.2, 0.03)}
     for signal, (bias, tolerance) in offsets.items():
@@ -97,7 +100,9 @@ def test_calibrated_config_loads_with_check_and_says_what_it_changed(calibrated)
     result = canest("check", "--config", out)
     assert result.returncode == 0, result.stderr
     text = out.read_text()
-    assert text.count("  # calibrated") == 7  # four vehicle values, three sensor offsets
+    assert text.count("  # calibrated") == 8  # four vehicle values, the radius's uncertainty, three sensor offsets
+    radius = load_config(out).vehicle.wheel_radius_uncertainty  # the fit's 0.1 % and the drift between drives
+    assert RADIUS_DRIFT <= radius < 0.005
     assert "road bank of" in text and "(not a config value)" in text
 
 

@@ -96,6 +96,21 @@ def test_cornering_stiffness_uncertainty_is_read_within_its_range_and_defaults_t
     assert re.search(r":\d+: vehicle\.cornering_stiffness_uncertainty: .*0 to 1", error_of(path))
 
 
+def test_wheel_radius_and_gyro_bias_claims_are_read_within_their_ranges(tmp_path):
+    """What the config says it knows of the rolling radius and the gyro's bias (README "How far to trust the
+    output"): the built-in simulated car's radius is exact; a car that says nothing gets a tire size's 2 %."""
+    config = load_config(CONFIG)
+    assert config.vehicle.wheel_radius_uncertainty == 0.0 and config.estimator.gyro_bias_std == 0.0
+    path = write_variant(tmp_path, lambda d: d["vehicle"].pop("wheel_radius_uncertainty"))
+    assert load_config(path).vehicle.wheel_radius_uncertainty == 0.02
+    path = write_variant(tmp_path, lambda d: d["estimator"].update(gyro_bias_std=0.01))
+    assert load_config(path).estimator.gyro_bias_std == 0.01
+    path = write_variant(tmp_path, lambda d: d["vehicle"].update(wheel_radius_uncertainty=0.5))
+    assert re.search(r":\d+: vehicle\.wheel_radius_uncertainty: .*0 to 0\.2", error_of(path))
+    path = write_variant(tmp_path, lambda d: d["estimator"].update(gyro_bias_std=-0.01))
+    assert re.search(r":\d+: estimator\.gyro_bias_std: ", error_of(path))
+
+
 def test_typo_in_a_key(tmp_path):
     path = write_variant(tmp_path, lambda d: d["estimator"].update(rate_hzz=50))
     assert "estimator.rate_hzz: unknown key" in error_of(path)

@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from canest.calibration import STIFFNESS_MODEL_ERROR, STIFFNESSES
 from canest.config import load_config
 from canest.errors import ConfigError
 from canest.estimation.calibration_blocks import BlockMeans
@@ -35,7 +36,7 @@ from canest.models.two_track import TwoTrackModel
 from canest.models.wheels import WheelGeometry
 from canest.pipeline import Pipeline
 from canest.resample import Sample
-from canest.sim.mismatch import PlantMismatch, true_vehicle
+from canest.sim.mismatch import PlantMismatch, true_fit, true_vehicle
 from canest.sim.sensors import DEFAULT_SENSORS
 from canest.sim.simulate import simulate
 from tests.conftest import CONFIG, ROOT
@@ -200,6 +201,35 @@ def test_vx_and_the_yaw_rate_carry_the_error_of_the_applied_corrections(learned,
     assert np.mean(yaw_error < 2.0 * np.array([e.values["yaw_rate_std"] for e in gyro_applied])) > 0.96  # was 0.946
 
 
+def test_before_the_corrections_are_applied_vx_and_the_yaw_rate_carry_the_configs_claim(config, drive, learned):
+    """A config that says how well it knows the radius and the gyro's bias (3 %, 0.5 deg/s: this wrong car's
+    errors as 1 std) publishes them until the learner applies its own (35 s here): over the first 30 s vx is
+    ``uncertain`` wherever ``|vx|`` times 3 % passes 0.5 m/s and within 2 std on every valid tick (the same drive
+    by a config claiming both exact: 4 %, 81 % of the valid ticks wrong), the yaw rate within 2 std on all
+    (0.7 %)."""
+    claiming = dataclasses.replace(
+        config, vehicle=dataclasses.replace(config.vehicle, wheel_radius_uncertainty=0.03),
+        estimator=dataclasses.replace(config.estimator, gyro_bias_std=math.radians(0.5)))
+    pipeline, start = Pipeline(claiming), drive.frames[0].timestamp
+    estimates = [e for frame in drive.frames if frame.timestamp < start + 30.0 for e in pipeline.feed(frame)]
+    assert pipeline.calibration.correction_std == (None, None)  # nothing applied yet: the claim is published
+
+    def within_two_std(estimates, state):
+        valid = [e for e in estimates if e.valid.get(state)]
+        truth = np.interp([e.t for e in valid], drive.truth["t"], drive.truth[state])
+        error = np.abs(np.array([e.values[state] for e in valid]) - truth)
+        return len(valid), np.mean(error < 2.0 * np.array([e.values[f"{state}_std"] for e in valid]))
+
+    exact = [e for e in learned[2] if e.t < start + 30.0]
+    for state in ("vx", "yaw_rate"):
+        count, covered = within_two_std(estimates, state)
+        assert count > 500 and covered > 0.98
+        assert within_two_std(exact, state)[1] < 0.1
+    fast = [e for e in estimates if abs(e.values["vx"]) * 0.03 > 0.55]
+    assert len(fast) > 500 and not any(e.valid.get("vx") for e in fast)
+    assert {e.causes["vx"] for e in fast} >= {"uncertain"}
+
+
 def test_the_steering_and_lateral_offsets_are_learned_but_never_applied(config):
     """A bank shows as both: applied, its side force is a force the model's tires carry, with every channel
     consistent (the banked road's sideslip below)."""
@@ -279,6 +309,21 @@ def test_no_kinematic_offset_before_the_lateral_offset_converged(config):
     assert calibration._kinematic_offsets() == (0.0, 0.0)
     calibration.evidence[ay], calibration.P[ay, ay] = 60.0, 1e-4
     assert calibration._kinematic_offsets() == (0.3, 0.0)
+
+
+def test_the_published_stiffness_std_holds_the_linear_tires_error_that_windows_do_not_average(config, learned):
+    """The learned stiffnesses' published std never falls below ``STIFFNESS_MODEL_ERROR`` of the value (what a
+    linear tire fitted to driving reads off the tires' small-slip stiffness, the same in every window), and covers
+    the true factor; convergence judges the windows' evidence alone."""
+    calibration = learned[0].calibration
+    report, truth = calibration.report(), true_fit(config.vehicle, WRONG)
+    for name in STIFFNESSES:
+        i = NAMES.index(name)
+        value, std = report[f"calib_{name}"], report[f"calib_{name}_std"]
+        print(f"{name}: {value:.4f} +- {std:.4f} (posterior {calibration.std[i]:.4f}), true {truth.value(name):.4f}")
+        assert std == pytest.approx(math.hypot(calibration.std[i], STIFFNESS_MODEL_ERROR * value))
+        assert abs(value - truth.value(name)) < 2.0 * std
+        assert report[f"calib_{name}_converged"] and calibration.std[i] < std
 
 
 def test_the_stiffnesses_are_learned_from_a_window_of_the_drive_and_reach_the_model(config, learned):

@@ -55,6 +55,11 @@ def test_a_drawn_car_is_as_wrong_as_its_config_admits(config):
         assert np.all((STIFFNESS_SCALE_LIMITS[0] <= scales) & (scales <= STIFFNESS_SCALE_LIMITS[1]))
     assert np.std([car.ay_bias for car in cars]) == pytest.approx(DRAWN_AY_BIAS, rel=0.15)
     assert np.std([car.gyro_bias for car in cars]) == pytest.approx(DRAWN_GYRO_BIAS, rel=0.15)
+    assert all(car.wheel_radius_scale == 1.0 for car in cars)  # the config claims its radius exact
+    tire_sized = dataclasses.replace(config.vehicle, wheel_radius_uncertainty=0.02)
+    radii = np.array([drawn_mismatch(tire_sized, seed).wheel_radius_scale for seed in range(400)])
+    assert np.std(radii) == pytest.approx(0.02, rel=0.15) and abs(np.mean(radii) - 1.0) < 0.004
+    assert drawn_mismatch(tire_sized, 7) == dataclasses.replace(cars[7], wheel_radius_scale=radii[7])  # same draws
     front = np.array([car.stiffness_scale_front for car in cars])
     rear = np.array([car.stiffness_scale_rear for car in cars])
     assert abs(np.corrcoef(front, rear)[0, 1]) < 0.15  # the two axles' tires are off independently

@@ -217,7 +217,7 @@ def main() -> None:
     args.duration = args.duration or 60.0
     paths = drives(config, args.duration, workdir)
     logs = [log for log, _ in paths]
-    fit = calibrate(config.vehicle, [read_drive(config, log) for log in logs])
+    fit = calibrate(config.vehicle, [read_drive(config, log) for log in logs]).with_model_error()
     print("\n".join(format_fit(config, fit, [log.name for log in logs])))
     truth = true_fit(config.vehicle, WRONG, [math.radians(bank) for _, bank in ROADS])
     print(f"\n{'parameter':<16} {'true':>10} {'calibrated':>11} {'error':>9}  bound")

@@ -6,8 +6,9 @@ values and a comment on each saying what it was and how sure the fit is:
 the axle cornering stiffnesses and the steering ratio in ``vehicle``, the
 effective wheel radius in ``vehicle.wheel_radius`` (and, for wheel speeds the
 DBC gives as a linear speed, in their ``scale``: the radius does not reach
-those), the sensor offsets as each signal's ``offset`` (SI, added after
-scaling: the bias subtracted). A road's bank is no property of the car and is
+those) with how well it is now known (``wheel_radius_uncertainty``,
+:data:`RADIUS_DRIFT`), the sensor offsets as each signal's ``offset`` (SI,
+added after scaling: the bias subtracted). A road's bank is no property of the car and is
 only reported in the header. DBC paths relative to the config are rewritten
 relative to the new file; the result is loaded as ``canest check`` loads it
 before it is written, and never replaces a file.
@@ -21,7 +22,7 @@ from pathlib import Path
 
 import yaml
 
-from canest.calibration import Fit
+from canest.calibration import CONFIDENCE, Fit
 from canest.apps.init import write_new
 from canest.codec.dbc import load_database
 from canest.config import BUILTIN_PREFIX, load_config
@@ -32,6 +33,9 @@ from canest.settings import Config
 from canest.signals import LINEAR_SPEED_UNITS, normal_unit
 
 SENSOR_OFFSETS = {"steering_wheel_angle": "steering_offset", "yaw_rate": "gyro_bias", "ay": "ay_bias"}
+# relative, 1 std: how far a tire's rolling radius moves between drives (pressure, temperature, speed: a few tenths
+# of a percent), beside the fit's own error, in the calibrated config's vehicle.wheel_radius_uncertainty
+RADIUS_DRIFT = 0.003
 
 
 def calibrated_values(config: Config, fit: Fit) -> dict:
@@ -47,6 +51,10 @@ def calibrated_values(config: Config, fit: Fit) -> dict:
         ("vehicle", "cornering_stiffness_rear"): scaled("rear", v.cornering_stiffness_rear),
         ("vehicle", "steering_ratio"): scaled("ratio", v.steering_ratio),
         ("vehicle", "wheel_radius"): scaled("speed", v.wheel_radius),
+        ("vehicle", "wheel_radius_uncertainty"): (
+            round(math.hypot(fit.half_width("speed") / CONFIDENCE / fit.value("speed"), RADIUS_DRIFT), 4),
+            f"calibrated: was {v.wheel_radius_uncertainty:g}; the fit's std and {RADIUS_DRIFT:g} of drift "
+            "between drives"),
     }
     for signal, name in SENSOR_OFFSETS.items():
         old = config.signals[signal].offset

@@ -41,11 +41,15 @@ def read_drive(doc: Document, section: dict) -> dict:
 def read_vehicle(doc: Document) -> VehicleParams:
     section = doc.section(("vehicle",))
     doc.reject_unknown(("vehicle",), section, [*limits.VEHICLE, *limits.DRIVE, *limits.ATTITUDE, "drive", "name",
-                                               "tire", "cornering_stiffness_uncertainty"])
+                                               "tire", "cornering_stiffness_uncertainty",
+                                               "wheel_radius_uncertainty"])
     values = {name: doc.number(("vehicle",), section, name, allowed) for name, allowed in limits.VEHICLE.items()}
     uncertainty = doc.number(("vehicle",), section, "cornering_stiffness_uncertainty", limits.STIFFNESS_UNCERTAINTY,
                              VehicleParams.cornering_stiffness_uncertainty)
+    radius_uncertainty = doc.number(("vehicle",), section, "wheel_radius_uncertainty", limits.RADIUS_UNCERTAINTY,
+                                    VehicleParams.wheel_radius_uncertainty)
     attitude = {name: doc.number(("vehicle",), section, name, allowed, getattr(VehicleParams, name))
                 for name, allowed in limits.ATTITUDE.items()}
     return VehicleParams(name=doc.text(("vehicle",), section, "name", doc.path.stem), tire=read_tire(doc),
-                         cornering_stiffness_uncertainty=uncertainty, **read_drive(doc, section), **attitude, **values)
+                         cornering_stiffness_uncertainty=uncertainty,
+                         wheel_radius_uncertainty=radius_uncertainty, **read_drive(doc, section), **attitude, **values)

@@ -118,7 +118,7 @@ class Estimator:
                                 getattr(model, "transition_low_speed_jacobian", None)),
         }
         self.latency_compensation = self.est.latency_compensation
-        self.judge = StateJudge(model, config.vehicle, self.dt)
+        self.judge = StateJudge(model, config.vehicle, self.dt, self.est.gyro_bias_std)
         self.stale_before = self.stale_now = frozenset()  # inputs stale on the previous and on this tick
         self.geometry = WheelGeometry(config.vehicle)
         self.layout = DriveLayout(config.vehicle)  # which wheels ax drives or brakes, for a car without torques
@@ -157,7 +157,7 @@ class Estimator:
         the gyro bias's until it converged), for the kinematic checks (:meth:`StateJudge.use_kinematic_offsets`)."""
         self.judge.use_kinematic_offsets(ay, yaw_rate)
 
-    def use_correction_std(self, speed: float, gyro_bias: float) -> None:
+    def use_correction_std(self, speed: float | None, gyro_bias: float | None) -> None:
         """The error of the online calibration's applied wheel-speed scale (relative) and gyro bias (rad/s), which
         the published vx and yaw rate carry (:meth:`StateJudge.use_correction_std`)."""
         self.judge.use_correction_std(speed, gyro_bias)

@@ -23,7 +23,7 @@ MEASURED_DIRECTLY = ("yaw_rate", "vx")
 
 
 class StateJudge:
-    def __init__(self, model, vehicle, dt: float):
+    def __init__(self, model, vehicle, dt: float, gyro_bias_std: float = 0.0):
         self.model = model
         self.vehicle = vehicle
         self.consistency = validity.Consistency(model.measurement_names)
@@ -39,7 +39,10 @@ class StateJudge:
         # |v r| (m/s^2), or a tire curve's rear slip angle (rad), held (:meth:`sideslip_model_std`)
         self.excitation = validity.FadingMaximum(dt, validity.MODEL_ERROR_MEMORY)
         self.kinematic_offsets = (0.0, 0.0)  # ay, yaw rate (:meth:`use_kinematic_offsets`)
-        self.correction_std = (0.0, 0.0)  # speed scale, gyro bias (:meth:`use_correction_std`)
+        # speed scale, gyro bias: the config's claim until the online calibration applies its own
+        # (:meth:`use_correction_std`)
+        self.claimed_std = (vehicle.wheel_radius_uncertainty, gyro_bias_std)
+        self.correction_std = self.claimed_std
         self.gyros = [n for n in validity.OBSERVED_BY["yaw_rate"] if n in model.measurement_names]  # the measured ones
         self.linear_tires = getattr(model, "linear_tires", False)
         self.sources = [SOURCES.get(name, (name,))[0] for name in model.measurement_names]  # input behind each channel
@@ -127,10 +130,12 @@ class StateJudge:
         has learned (the online calibration's, not applied to the inputs): the kinematic checks take them out."""
         self.kinematic_offsets = (ay, yaw_rate)
 
-    def use_correction_std(self, speed: float, gyro_bias: float) -> None:
+    def use_correction_std(self, speed: float | None, gyro_bias: float | None) -> None:
         """The error of the wheel-speed scale (relative) and the gyro bias (rad/s) the online calibration applied to
-        the inputs (0: none applied), which :meth:`widen` adds to vx's and the yaw rate's std."""
-        self.correction_std = (speed, gyro_bias)
+        the inputs, which :meth:`widen` adds to vx's and the yaw rate's std; ``None``: not applied, the config's
+        claim (``vehicle.wheel_radius_uncertainty``, ``estimator.gyro_bias_std``) holds."""
+        self.correction_std = tuple(claimed if applied is None else applied
+                                    for applied, claimed in zip((speed, gyro_bias), self.claimed_std))
 
     def _kinematic_inputs(self, inputs) -> tuple:
         """ay and yaw rate as the kinematic identity holds them: the inputs less :meth:`use_kinematic_offsets`'."""
@@ -150,8 +155,8 @@ class StateJudge:
         a leaky maximum fading over ``validity.HOLD`` s (it alternates tick by tick while vx and the reference cross:
         vx's bit flickered between valid and uncertain); sideslip with its model error (``beta_model_std``,
         :meth:`sideslip_model_std`), and never below its last mismatch with the kinematic sideslip change. vx (its
-        value ``vx``) and the yaw rate add the error of the applied wheel-speed scale and gyro bias in quadrature
-        (:meth:`use_correction_std`)."""
+        value ``vx``) and the yaw rate add the error of the wheel-speed scale and the gyro bias in quadrature
+        (:meth:`use_correction_std`: the config's claim, or the applied correction's)."""
         std = std.copy()
         speed_std, gyro_bias_std = self.correction_std
         yaw_rate = std[index["yaw_rate"]] * (validity.inflation(ratios["yaw_rate"]) * max(gyro_noise, 1.0))

@@ -64,12 +64,13 @@ from types import MappingProxyType
 
 import numpy as np
 
+from canest.calibration import STIFFNESS_MODEL_ERROR, STIFFNESSES
 from canest.estimation.calibration_blocks import Block, BlockMeans
 from canest.estimation.calibration_state import CalibrationStore
 from canest.estimation.inputs import WHEEL_SPEEDS
 from canest.estimation.learned_parameters import (APPLIED, AX, AY, FRONT, GYRO, NAMES, OFFSET, RATIO, REAR, SPEED,
                                                   STIFFNESS, UNDERSTEER, parameters)
-from canest.estimation.stiffness_window import STIFFNESS_NAMES, StiffnessWindow
+from canest.estimation.stiffness_window import StiffnessWindow
 from canest.models import identities
 from canest.params import VehicleParams
 from canest.settings import Config
@@ -159,6 +160,17 @@ class OnlineCalibration:
         J = np.array([-u / (k * k), 1.0 / k])
         both = [RATIO, UNDERSTEER]
         std[UNDERSTEER] = math.sqrt(max(float(J @ self.P[np.ix_(both, both)] @ J), 0.0))
+        return std
+
+    @property
+    def published_std(self) -> np.ndarray:
+        """:attr:`std` as reported, the stiffnesses' with the linear tires' model error in quadrature
+        (:data:`canest.calibration.STIFFNESS_MODEL_ERROR` of the value: a floor on the posterior, where the window
+        fits' ``FIT_FLOOR`` averages away over windows); :attr:`converged` judges the evidence alone."""
+        std = self.std
+        for name in STIFFNESSES:
+            i = NAMES.index(name)
+            std[i] = math.hypot(std[i], STIFFNESS_MODEL_ERROR * self.x[i])
         return std
 
     @property
@@ -329,7 +341,7 @@ class OnlineCalibration:
         and ``c`` had stds of 42 deg, 8 deg/s and 3.1 m/s^2, and taken whole they carried the steering
         identity's offset error (5 std) into the gyro bias and ``c`` (5 std each, the gyro bias 0.8 deg/s off)."""
         told = [i for i, name in enumerate(fit.names)
-                if name in STIFFNESS_NAMES or fit.covariance[i, i] <= self.prior_std[NAMES.index(name)] ** 2]
+                if name in STIFFNESSES or fit.covariance[i, i] <= self.prior_std[NAMES.index(name)] ** 2]
         names = [fit.names[i] for i in told]
         index = [NAMES.index(name) for name in names]
         R = fit.covariance[np.ix_(told, told)] + np.diag([FIT_FLOOR[name] ** 2 for name in names])
@@ -445,14 +457,15 @@ class OnlineCalibration:
 
     @property
     def correction_std(self) -> tuple:
-        """(speed scale, gyro bias): the error of each correction applied to the inputs, 0 until it is first applied
-        (the config's value holds until then): its learned std and the distance the rate-limited applied value has
-        still to follow, in quadrature. The inputs carry it whole, and no consistency test sees it: the reference
-        speed and the filter share the scaled wheels, and the filter's prior follows the gyro with its bias. Without
+        """(speed scale, gyro bias): the error of each correction applied to the inputs, ``None`` until it is first
+        applied (the config's value and its claimed uncertainty hold until then): its learned std and the distance
+        the rate-limited applied value has still to follow, in quadrature. The inputs carry it whole, and no
+        consistency test sees it: the reference speed and the filter share the scaled wheels, and the filter's
+        prior follows the gyro with its bias. Without
         it, on the wrong car's banked road of ``tests/test_online_calibration.py`` (the scale applied at 35 s), vx
         after the scale was applied was within 2 std on 64 % of its valid ticks (NEES 9.5, valid but wrong 2.3 %)."""
         return tuple(math.hypot(math.sqrt(max(self.P[i, i], 0.0)), self.x[i] - self.applied[i])
-                     if self.correcting[i] else 0.0 for i in (SPEED, GYRO))
+                     if self.correcting[i] else None for i in (SPEED, GYRO))
 
     @property
     def stiffness(self) -> tuple:
@@ -468,7 +481,7 @@ class OnlineCalibration:
         return self._report
 
     def _build_report(self) -> dict:
-        values, std, converged = self.values, self.std, self.converged
+        values, std, converged = self.values, self.published_std, self.converged
         out = {}
         for i, name in enumerate(NAMES):
             out[f"calib_{name}"] = float(values[i])

@@ -41,6 +41,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from canest.calibration import CONFIDENCE, STIFFNESSES
 from canest.estimation.calibration_blocks import BlockMeans
 from canest.models import output_error
 from canest.params import VehicleParams
@@ -52,8 +53,7 @@ LATENCY = 5.0  # s of drive time between a window's end and taking its fit
 MIN_BENDS = 2.0  # s of a window turning (v r) between BEND_AY and the fit's linear limit: fewer saw no yaw dynamics
 BEND_AY = 0.5  # m/s^2
 MAX_HALF_WIDTH = 0.3  # a fit whose 95 % interval of a stiffness factor is wider saw too few bends: not used
-STIFFNESS_NAMES = ("front", "rear")
-FITTED = (*STIFFNESS_NAMES, "ratio", "steering_offset", "gyro_bias", "ay_bias", "speed")  # the learner's too
+FITTED = (*STIFFNESSES, "ratio", "steering_offset", "gyro_bias", "ay_bias", "speed")  # the learner's too
 CLOSE_WAIT = 1.0  # s
 WORKER_ENV = {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}  # one core at most
 WORKER_NICE = 5
@@ -80,15 +80,15 @@ def fit_window(vehicle: VehicleParams, drive: output_error.Drive) -> WindowFit |
     if bends.sum() * output_error.STEP < MIN_BENDS:
         return None
     fit = output_error.calibrate(vehicle, [drive])
-    index = [fit.names.index(name) for name in STIFFNESS_NAMES]
+    index = [fit.names.index(name) for name in STIFFNESSES]
     half = fit.half_widths[index]
-    bounds = [p for p in output_error.SHARED if p.name in STIFFNESS_NAMES]
+    bounds = [p for p in output_error.SHARED if p.name in STIFFNESSES]
     values = fit.values[index]
     if not np.all((half > 0.0) & (half < MAX_HALF_WIDTH)) or any(not p.low < v < p.high
                                                                   for p, v in zip(bounds, values)):
         return None
     fitted = [fit.names.index(name) for name in FITTED]
-    std = fit.half_widths[fitted] / output_error.CONFIDENCE
+    std = fit.half_widths[fitted] / CONFIDENCE
     covariance = fit.correlation[np.ix_(fitted, fitted)] * np.outer(std, std)
     return WindowFit(FITTED, fit.values[fitted], covariance, drive.seconds)
 

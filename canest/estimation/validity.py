@@ -79,8 +79,10 @@ Published standard deviations get these terms beyond the filter's covariance:
   while the reference was 0.4 off with a std of 0.3). A model integrating ax
   shares the reference's integration, ax and ``r vy`` alike: their
   difference tells nothing there;
-- vx and the yaw rate carry the error of the wheel-speed scale and the gyro
-  bias the online calibration applied to the inputs, in quadrature
+- vx and the yaw rate carry the error of the wheel radius and the gyro bias,
+  in quadrature: the config's claim (``vehicle.wheel_radius_uncertainty``,
+  ``estimator.gyro_bias_std``) until the online calibration applies its own
+  correction, then that correction's error
   (:attr:`canest.estimation.online_calibration.OnlineCalibration.correction_std`):
   one error every tick shares, which no consistency test sees (the reference
   speed takes the same scaled wheels; the filter's prior follows the gyro).

@@ -56,7 +56,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from canest.calibration import BANK, SHARED, Fit
+from canest.calibration import BANK, CONFIDENCE, SHARED, Fit
 from canest.errors import DependencyError
 from canest.models.wheels import GRAVITY
 from canest.params import VehicleParams
@@ -68,7 +68,6 @@ SETTLE = 1.0  # s at the start of each stretch left out of the fit: the model st
 LINEAR_AY = 2.0  # m/s^2: ticks turning harder (turning_ay) are left out of the fit (the model still runs
 # through them): the tires' force there falls short of linear, by the curve and by the load transfer
 MEAN_BANK_STD = math.radians(0.01)  # rad: the prior that holds the logs' mean bank at 0
-CONFIDENCE = 1.96  # 95 % two-sided
 INSTALL = "pip install 'canest[calibrate]'"
 DIFF_STEP = 1e-6  # forward-difference step, in units of each parameter's scale
 

@@ -74,11 +74,13 @@ def drawn_mismatch(config_vehicle: VehicleParams, seed: int) -> PlantMismatch:
     """A car as wrong as its config admits, the same for every run of ``seed``: each axle's cornering stiffness
     scaled by ``1 + e N(0, 1)`` (``e`` the config's ``cornering_stiffness_uncertainty``, within
     :data:`STIFFNESS_SCALE_LIMITS`), lateral accelerometer and gyro biases drawn with :data:`DRAWN_AY_BIAS` and
-    :data:`DRAWN_GYRO_BIAS`."""
-    normal = np.random.default_rng([seed, 8855]).standard_normal(4)
+    :data:`DRAWN_GYRO_BIAS`, the wheel radius scaled by ``1 + e_r N(0, 1)`` (``e_r`` the config's
+    ``wheel_radius_uncertainty``; the fifth draw, so a config claiming 0 draws the cars it drew before)."""
+    normal = np.random.default_rng([seed, 8855]).standard_normal(5)
     low, high = STIFFNESS_SCALE_LIMITS
     scale = np.clip(1.0 + config_vehicle.cornering_stiffness_uncertainty * normal[:2], low, high)
     return PlantMismatch(stiffness_scale_front=float(scale[0]), stiffness_scale_rear=float(scale[1]),
+                         wheel_radius_scale=float(1.0 + config_vehicle.wheel_radius_uncertainty * normal[4]),
                          ay_bias=float(DRAWN_AY_BIAS * normal[2]), gyro_bias=float(DRAWN_GYRO_BIAS * normal[3]))
 
 
