@@ -314,7 +314,8 @@ def test_no_kinematic_offset_before_the_lateral_offset_converged(config):
 def test_the_published_stiffness_std_holds_the_linear_tires_error_that_windows_do_not_average(config, learned):
     """The learned stiffnesses' published std never falls below ``STIFFNESS_MODEL_ERROR`` of the value (what a
     linear tire fitted to driving reads off the tires' small-slip stiffness, the same in every window), and covers
-    the true factor; convergence judges the windows' evidence alone."""
+    the true factor; the understeer gradient's carries that error too; convergence judges the windows' evidence
+    alone."""
     calibration = learned[0].calibration
     report, truth = calibration.report(), true_fit(config.vehicle, WRONG)
     for name in STIFFNESSES:
@@ -324,6 +325,11 @@ def test_the_published_stiffness_std_holds_the_linear_tires_error_that_windows_d
         assert std == pytest.approx(math.hypot(calibration.std[i], STIFFNESS_MODEL_ERROR * value))
         assert abs(value - truth.value(name)) < 2.0 * std
         assert report[f"calib_{name}_converged"] and calibration.std[i] < std
+    car = true_vehicle(config.vehicle, WRONG)
+    understeer, understeer_std = report["calib_understeer"], report["calib_understeer_std"]
+    print(f"understeer: {understeer:.5f} +- {understeer_std:.5f}, true {car.understeer_gradient:.5f}")
+    assert abs(understeer - car.understeer_gradient) < 2.0 * understeer_std
+    assert understeer_std > 0.05 * car.mass / car.wheelbase * car.cg_to_rear / car.cornering_stiffness_front
 
 
 def test_the_stiffnesses_are_learned_from_a_window_of_the_drive_and_reach_the_model(config, learned):
