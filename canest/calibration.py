@@ -39,6 +39,10 @@ CONFIDENCE = 1.96  # a 95 % two-sided interval in standard deviations
 # 60 s roads fitted together read the front 3.0 %, the rear 4.9 % soft; ten roads online after 60 s the rear 1-8 %
 # soft (RMS 4.4 %), the front within 4 %; without it the rear's error was 1.7 (60 s) to 2.5 (120 s) of its std
 STIFFNESS_MODEL_ERROR = 0.05
+# relative, 1 std: how far a tire's rolling radius moves between drives (pressure, temperature, speed: a few tenths
+# of a percent): beside a fit's own error in ``canest calibrate``'s vehicle.wheel_radius_uncertainty, and added to the
+# online calibration's saved speed scale when it is reloaded
+RADIUS_DRIFT = 0.003
 
 
 @dataclass

@@ -50,9 +50,10 @@ class VehicleParams:
     # relative (1 std) error of the cornering stiffnesses: 0.3 for textbook values, less once identified
     # (``canest calibrate``); the published sideslip std carries it (estimation.validity)
     cornering_stiffness_uncertainty: float = 0.3
-    # relative (1 std) error of ``wheel_radius`` as the effective rolling radius: a tire's size code and a new tread
-    # give it within ~2 % (wear takes up to 2.5 %, pressure and load ~1 %); the published vx carries it until the
-    # online calibration applies its own scale (estimation.judge.StateJudge.widen)
+    # relative (1 std) error of ``wheel_radius`` as the effective rolling radius: from the tire's size code, taken
+    # 2-3 % below its unloaded radius (README "Your car"), within ~2 % (wear takes up to 2.5 % over a tread's life,
+    # pressure and load ~1 %); the published vx carries it until the online calibration applies its own scale
+    # (estimation.judge.StateJudge.widen)
     wheel_radius_uncertainty: float = 0.02
     # deg/g (the field's unit) of body roll and nose-up pitch that the accelerometers read as gravity
     # (canest.models.attitude); 0: the ESC publishes ax and ay level

@@ -7,6 +7,7 @@ import sys
 import pytest
 import yaml
 
+from canest.apps.init import UNMEASURED_RADIUS
 from canest.config import DEFAULT_CONFIG, load_config
 from canest.config.discover import wheel_of, words_of
 from canest.estimation.catalog import BASE_INPUTS, CATALOG, losses
@@ -68,6 +69,7 @@ def test_init_from_the_ford_dbc_finds_its_inputs_and_check_accepts_the_config(tm
     assert set(signals) == set(BASE_INPUTS)
     text = out.read_text()
     assert text.count("# CONFIRM") == len(BASE_INPUTS)
+    assert load_config(out).vehicle.wheel_radius_uncertainty == UNMEASURED_RADIUS  # another car's radius, said
     assert "no motor_torques" in text  # what the car's DBC does not give, said in the file
     check = canest("check", "--config", out)
     assert check.returncode == 0, check.stderr

@@ -10,8 +10,8 @@ from canest.signals import WHEELS
 from canest.sim.maneuvers import Driver
 from canest.models.attitude import level_reading, per_si, tilted_reading
 from canest.models.wheels import GRAVITY
-from canest.sim.mismatch import (DRAWN_AY_BIAS, DRAWN_GYRO_BIAS, STIFFNESS_SCALE_LIMITS, PlantMismatch,
-                                  drawn_mismatch)
+from canest.sim.mismatch import (DRAWN_AY_BIAS, DRAWN_GYRO_BIAS, RADIUS_SCALE_LIMITS, STIFFNESS_SCALE_LIMITS,
+                                  PlantMismatch, drawn_mismatch)
 from canest.sim.simulate import simulate
 
 
@@ -60,6 +60,9 @@ def test_a_drawn_car_is_as_wrong_as_its_config_admits(config):
     radii = np.array([drawn_mismatch(tire_sized, seed).wheel_radius_scale for seed in range(400)])
     assert np.std(radii) == pytest.approx(0.02, rel=0.15) and abs(np.mean(radii) - 1.0) < 0.004
     assert drawn_mismatch(tire_sized, 7) == dataclasses.replace(cars[7], wheel_radius_scale=radii[7])  # same draws
+    vague = dataclasses.replace(config.vehicle, wheel_radius_uncertainty=0.2)
+    radii = np.array([drawn_mismatch(vague, seed).wheel_radius_scale for seed in range(400)])
+    assert radii.min() == RADIUS_SCALE_LIMITS[0] and radii.max() == RADIUS_SCALE_LIMITS[1]  # what a calibration finds
     front = np.array([car.stiffness_scale_front for car in cars])
     rear = np.array([car.stiffness_scale_rear for car in cars])
     assert abs(np.corrcoef(front, rear)[0, 1]) < 0.15  # the two axles' tires are off independently

@@ -22,7 +22,7 @@ from pathlib import Path
 
 import yaml
 
-from canest.calibration import CONFIDENCE, Fit
+from canest.calibration import CONFIDENCE, RADIUS_DRIFT, Fit
 from canest.apps.init import write_new
 from canest.codec.dbc import load_database
 from canest.config import BUILTIN_PREFIX, load_config
@@ -33,9 +33,6 @@ from canest.settings import Config
 from canest.signals import LINEAR_SPEED_UNITS, normal_unit
 
 SENSOR_OFFSETS = {"steering_wheel_angle": "steering_offset", "yaw_rate": "gyro_bias", "ay": "ay_bias"}
-# relative, 1 std: how far a tire's rolling radius moves between drives (pressure, temperature, speed: a few tenths
-# of a percent), beside the fit's own error, in the calibrated config's vehicle.wheel_radius_uncertainty
-RADIUS_DRIFT = 0.003
 
 
 def calibrated_values(config: Config, fit: Fit) -> dict:

@@ -32,6 +32,7 @@ from canest.signals import INPUT_GROUPS, LINEAR_SPEED_UNITS, normal_unit
 
 CONFIG_LOG = logging.getLogger("canest.config")  # the config loader's warnings (a tolerated DBC problem)
 ORDER = (*BASE_INPUTS, *INPUT_GROUPS["motor_torques"])  # the inputs init looks for, in the config's order
+UNMEASURED_RADIUS = 0.1  # vehicle.wheel_radius_uncertainty of the built-in car's radius on another car: 10 % (1 std)
 
 
 @dataclass(frozen=True)
@@ -91,6 +92,8 @@ def vehicle_lines(name: str, car: str | None) -> list:
         else:
             lines.append(f"  {key}: {_number(getattr(defaults, key))}    # canest's default (built-in "
                          f"{DEFAULT_CONFIG.name}): measure or look up yours")
+    lines.append(f"  wheel_radius_uncertainty: {UNMEASURED_RADIUS}    # relative: wheel_radius is another car's until "
+                 "you measure yours (README \"Your car\"); then say how well you know it (0.02: a tire size's)")
     return lines
 
 

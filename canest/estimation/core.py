@@ -432,6 +432,8 @@ class Estimator:
         walk_unknown = self.ax_noise.density is None and reference.last_t == t
         causes = self.judge.causes(inputs, ratios, std[self.vx], lateral, t, drift, walk_unknown)
         valid = {name: causes[name] == "valid" for name in causes}
-        valid["vy"] = valid["beta"] and valid["vx"]
+        # vy = vx tan(beta) holds vx's std in its own (tan(beta) vx_std): a vx only "uncertain" (a wide std, such as
+        # an unlearned wheel radius's) leaves vy valid; a vx that is wrong, missing or saturated does not
+        valid["vy"] = valid["beta"] and causes["vx"] in ("valid", "uncertain")
         self._extra_values(values, valid, causes, std, inputs, ratios)
         return Estimate(t, values, valid, mode, self.est.filter, self.filter.nis, missing, self.resets, causes)

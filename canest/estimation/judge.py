@@ -186,18 +186,18 @@ class StateJudge:
 
     @staticmethod
     def _vx_cause(inputs, ratio: float, vx_std: float, drift: float, walk_unknown: bool) -> str:
-        """As every measured state's, then "model_regime" for a drift beyond ``DRIFT_LIMIT``, "uncertain" for a std
-        beyond ``VX_VALID_STD``, and "initializing" while the reference speed takes an ax whose noise is not yet
-        measured (the first half second: the random walk of its integration, which a vibrating IMU makes 0.4
-        m/s, is unknown, and an anchor does not bring back a filter that took it)."""
+        """As every measured state's, then "model_regime" for a drift beyond ``DRIFT_LIMIT``, "initializing" while the
+        reference speed takes an ax whose noise is not yet measured (the first half second: the random walk of its
+        integration, which a vibrating IMU makes 0.4 m/s, is unknown, and an anchor does not bring back a filter
+        that took it), and "uncertain" for a std beyond ``VX_VALID_STD`` (the only cause that leaves vy valid)."""
         cause = validity.judge(inputs.has(*WHEEL_SPEEDS) or inputs.has("ax"),
                                any(inputs.saturated(w) for w in WHEEL_SPEEDS), ratio)
         if cause == "valid" and drift > validity.DRIFT_LIMIT:
             return "model_regime"
-        if cause == "valid" and vx_std > validity.VX_VALID_STD:
-            return "uncertain"
         if cause == "valid" and walk_unknown:
             return "initializing"
+        if cause == "valid" and vx_std > validity.VX_VALID_STD:
+            return "uncertain"
         return cause
 
     def _lateral_cause(self, inputs, ratio: float, low_speed: bool, after_reset: bool, zero_learned: bool,

@@ -25,12 +25,15 @@ class Learned:
     rate: float
 
 
-def parameters(vehicle: VehicleParams) -> tuple:
-    """The learned parameters; the understeer gradient starts at the config's."""
+def parameters(vehicle: VehicleParams, gyro_bias_std: float = 0.0) -> tuple:
+    """The learned parameters; the understeer gradient starts at the config's; the speed scale's and the gyro
+    bias's prior never narrower than what the config claims of them (``vehicle.wheel_radius_uncertainty``,
+    ``estimator.gyro_bias_std``, rad/s), whose place their learned std takes once applied."""
     deg = math.radians(1.0)
     return (
-        Learned("speed", 1.0, 0.03, 0.8, 1.25, 0.001, 0.005, 0.01),
-        Learned("gyro_bias", 0.0, 0.5 * deg, -5.0 * deg, 5.0 * deg, 0.01 * deg, 0.15 * deg, 0.1 * deg),
+        Learned("speed", 1.0, max(0.03, vehicle.wheel_radius_uncertainty), 0.8, 1.25, 0.001, 0.005, 0.01),
+        Learned("gyro_bias", 0.0, max(0.5 * deg, gyro_bias_std), -5.0 * deg, 5.0 * deg, 0.01 * deg, 0.15 * deg,
+                0.1 * deg),
         Learned("ay_bias", 0.0, 0.3, -2.0, 2.0, 0.01, 0.05, 0.1),
         Learned("steering_offset", 0.0, 2.0 * deg, -30.0 * deg, 30.0 * deg, 0.05 * deg, 0.2 * deg, 1.0 * deg),
         Learned("ratio", 1.0, 0.1, 0.5, 2.0, 0.002, 0.03, 0.025),

@@ -64,7 +64,7 @@ from types import MappingProxyType
 
 import numpy as np
 
-from canest.calibration import STIFFNESS_MODEL_ERROR, STIFFNESSES
+from canest.calibration import RADIUS_DRIFT, STIFFNESS_MODEL_ERROR, STIFFNESSES
 from canest.estimation.calibration_blocks import Block, BlockMeans
 from canest.estimation.calibration_state import CalibrationStore
 from canest.estimation.inputs import WHEEL_SPEEDS
@@ -110,9 +110,10 @@ NEEDED = ("yaw_rate", "ay", "steering_wheel_angle", *WHEEL_SPEEDS)
 class OnlineCalibration:
     """The learner (module docstring): :meth:`correct` learns from a tick's raw sample and returns it corrected."""
 
-    def __init__(self, vehicle: VehicleParams, names: tuple, dt: float, store=None, enabled: bool = True):
+    def __init__(self, vehicle: VehicleParams, names: tuple, dt: float, store=None, enabled: bool = True,
+                 gyro_bias_std: float = 0.0):
         self.vehicle = vehicle
-        self.specs = parameters(vehicle)
+        self.specs = parameters(vehicle, gyro_bias_std)
         self.x = np.array([p.start for p in self.specs])
         self.P = np.diag([p.std**2 for p in self.specs])
         self.low = np.array([p.low for p in self.specs])
@@ -507,8 +508,8 @@ class OnlineCalibration:
                        "applied": float(self.applied[i])} for i, name in enumerate(NAMES)}
 
     def restore(self, saved: dict) -> None:
-        """Take a checked saved state (:meth:`CalibrationStore.load` inflated its variances); a parameter it lacks
-        keeps its prior."""
+        """Take a checked saved state (:meth:`CalibrationStore.load` inflated its variances, and the speed scale's
+        takes :data:`canest.calibration.RADIUS_DRIFT` more); a parameter it lacks keeps its prior."""
         for i, name in enumerate(NAMES):
             if name in saved:
                 entry = saved[name]
@@ -518,6 +519,8 @@ class OnlineCalibration:
                     self.correcting[i] = self.applied[i] != self.specs[i].start
         variances = np.array([saved[name]["variance"] if name in saved else spec.std**2
                               for name, spec in zip(NAMES, self.specs)])
+        if "speed" in saved:  # the tires' radius moved since (pressure, temperature): the published vx carries it
+            variances[SPEED] += RADIUS_DRIFT**2
         self.spread = self._new_spreads()  # the noise is this drive's, measured anew
         k, understeer = self.x[RATIO], self.x[UNDERSTEER]
         self.x[UNDERSTEER] = k * understeer  # the state's u = k K_us, its variance as if k and K_us were independent:
@@ -547,7 +550,8 @@ def make_calibration(config: Config, names: tuple) -> OnlineCalibration:
     a disabled one (inputs passed through) when it is off or an input it needs is not mapped."""
     est = config.estimator
     store = CalibrationStore(est.state_file) if est.state_file else None
-    return OnlineCalibration(config.vehicle, names, 1.0 / est.rate_hz, store, est.online_calibration)
+    return OnlineCalibration(config.vehicle, names, 1.0 / est.rate_hz, store, est.online_calibration,
+                             est.gyro_bias_std)
 
 
 class InnovationSpread:

@@ -263,7 +263,8 @@ class FadingMaximum:
 
 
 class Holds:
-    """Keep a state invalid for ``HOLD`` s after a test of :data:`HELD_CAUSES` last failed, with that cause."""
+    """Keep a state invalid for ``HOLD`` s after a test of :data:`HELD_CAUSES` last failed, with that cause (also
+    over vx's ``uncertain``, which clears its bit but not vy's: a held vx is not only wide)."""
 
     def __init__(self):
         self.until = {}
@@ -277,7 +278,7 @@ class Holds:
         if cause in HELD_CAUSES:
             self.until[state], self.cause[state] = t + HOLD, cause
             return cause
-        if cause == "valid" and t < self.until.get(state, -math.inf):
+        if cause in ("valid", "uncertain") and t < self.until.get(state, -math.inf):
             return self.cause[state]
         return cause
 

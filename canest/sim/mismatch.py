@@ -68,6 +68,7 @@ class PlantMismatch:
 DRAWN_AY_BIAS = 0.1  # m/s^2, std: a production ESC accelerometer's residual offset plus a road's crown (2 % is 0.2)
 DRAWN_GYRO_BIAS = math.radians(0.05)  # rad/s, std: what the built-in config's gyro noise (0.11 deg/s) leaves for bias
 STIFFNESS_SCALE_LIMITS = (0.5, 1.5)
+RADIUS_SCALE_LIMITS = next((p.low, p.high) for p in SHARED if p.name == "speed")  # what a calibration may find
 
 
 def drawn_mismatch(config_vehicle: VehicleParams, seed: int) -> PlantMismatch:
@@ -75,12 +76,14 @@ def drawn_mismatch(config_vehicle: VehicleParams, seed: int) -> PlantMismatch:
     scaled by ``1 + e N(0, 1)`` (``e`` the config's ``cornering_stiffness_uncertainty``, within
     :data:`STIFFNESS_SCALE_LIMITS`), lateral accelerometer and gyro biases drawn with :data:`DRAWN_AY_BIAS` and
     :data:`DRAWN_GYRO_BIAS`, the wheel radius scaled by ``1 + e_r N(0, 1)`` (``e_r`` the config's
-    ``wheel_radius_uncertainty``; the fifth draw, so a config claiming 0 draws the cars it drew before)."""
+    ``wheel_radius_uncertainty``, within :data:`RADIUS_SCALE_LIMITS`; the fifth draw, so a config claiming 0 draws
+    the cars it drew before)."""
     normal = np.random.default_rng([seed, 8855]).standard_normal(5)
     low, high = STIFFNESS_SCALE_LIMITS
     scale = np.clip(1.0 + config_vehicle.cornering_stiffness_uncertainty * normal[:2], low, high)
     return PlantMismatch(stiffness_scale_front=float(scale[0]), stiffness_scale_rear=float(scale[1]),
-                         wheel_radius_scale=float(1.0 + config_vehicle.wheel_radius_uncertainty * normal[4]),
+                         wheel_radius_scale=float(np.clip(1.0 + config_vehicle.wheel_radius_uncertainty * normal[4],
+                                                          *RADIUS_SCALE_LIMITS)),
                          ay_bias=float(DRAWN_AY_BIAS * normal[2]), gyro_bias=float(DRAWN_GYRO_BIAS * normal[3]))
 
 
