@@ -172,8 +172,7 @@ class OnlineCalibration:
         that learns it holds the same linear tires; without it, on ten roads after 120 s, its error was 4.2 of its
         std in RMS). :attr:`converged` judges the evidence alone."""
         std = self.std
-        for name in STIFFNESSES:
-            i = NAMES.index(name)
+        for i in (FRONT, REAR):
             std[i] = math.hypot(std[i], STIFFNESS_MODEL_ERROR * self.x[i])
         v = self.vehicle
         front, rear = v.cornering_stiffness_front * self.x[FRONT], v.cornering_stiffness_rear * self.x[REAR]
@@ -469,9 +468,9 @@ class OnlineCalibration:
         applied (the config's value and its claimed uncertainty hold until then): its learned std and the distance
         the rate-limited applied value has still to follow, in quadrature. The inputs carry it whole, and no
         consistency test sees it: the reference speed and the filter share the scaled wheels, and the filter's
-        prior follows the gyro with its bias. Without
-        it, on the wrong car's banked road of ``tests/test_online_calibration.py`` (the scale applied at 35 s), vx
-        after the scale was applied was within 2 std on 64 % of its valid ticks (NEES 9.5, valid but wrong 2.3 %)."""
+        prior follows the gyro with its bias. Without it, on the wrong car's banked road of
+        ``tests/test_online_calibration.py`` (the scale applied at 35 s), vx after the scale was applied was within
+        2 std on 64 % of its valid ticks (NEES 9.5, valid but wrong 2.3 %)."""
         return tuple(math.hypot(math.sqrt(max(self.P[i, i], 0.0)), self.x[i] - self.applied[i])
                      if self.correcting[i] else None for i in (SPEED, GYRO))
 
