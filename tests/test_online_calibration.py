@@ -36,7 +36,7 @@ from canest.models.two_track import TwoTrackModel
 from canest.models.wheels import WheelGeometry
 from canest.pipeline import Pipeline
 from canest.resample import Sample
-from canest.sim.mismatch import PlantMismatch, true_fit, true_vehicle
+from canest.sim.mismatch import PlantMismatch, flat_road_offsets, true_fit, true_vehicle
 from canest.sim.sensors import DEFAULT_SENSORS
 from canest.sim.simulate import simulate
 from tests.conftest import CONFIG, ROOT
@@ -100,6 +100,19 @@ def test_measured_ay_holds_with_the_sensor_errors_and_the_bank_as_one_offset(tru
                                        WRONG.wheel_radius_scale, WRONG.gyro_bias,
                                        WRONG.ay_bias - WRONG.bank_acceleration)
     assert steady.sum() > 1000 and np.max(np.abs(predicted - measured)) < 0.03
+
+
+def test_the_banked_road_holds_the_equivalent_flat_roads_offsets_in_steady_bends(truth, car, config):
+    """What the steady identities can learn on a bank: a flat road (ay = v r) with ``flat_road_offsets``."""
+    steady = steady_bends(truth)
+    t = {name: values[steady] for name, values in truth.items()}
+    steering_offset, ay_bias = flat_road_offsets(config.vehicle, WRONG)
+    measured = t["steering_wheel_angle"] + WRONG.steering_offset
+    flat = identities.steady_steering_wheel_angle(t["vx"], t["yaw_rate"], t["vx"] * t["yaw_rate"], steering_offset,
+                                                  car.steering_ratio, car.wheelbase, car.understeer_gradient)
+    assert abs(np.median(flat - measured)) < math.radians(0.2)
+    assert abs(steering_offset - WRONG.steering_offset) > math.radians(3.0)  # the bank's share is not small
+    assert np.median(t["ay"] + WRONG.ay_bias - t["vx"] * t["yaw_rate"]) == pytest.approx(ay_bias, abs=0.02)
 
 
 def test_understeer_gradient_sign_and_value(car):

@@ -40,7 +40,7 @@ from canest.config import DEFAULT_CONFIG, load_config  # noqa: E402
 from canest.estimation.learned_parameters import NAMES, parameters  # noqa: E402
 from canest.io.logfiles import open_log  # noqa: E402
 from canest.pipeline import Pipeline  # noqa: E402
-from canest.sim.mismatch import PlantMismatch, true_fit, true_vehicle  # noqa: E402
+from canest.sim.mismatch import PlantMismatch, flat_road_offsets, true_fit, true_vehicle  # noqa: E402
 from canest.sim.sensors import DEFAULT_SENSORS  # noqa: E402
 from canest.sim.simulate import simulate  # noqa: E402
 
@@ -109,11 +109,12 @@ def online(config, duration: float, bank_deg: float, workdir: Path, attitude=(0.
         sim.write_log(log)
         sim.write_truth(truth)
     deg = math.degrees(1.0)
+    steering_offset, ay_bias = flat_road_offsets(config.vehicle, mismatch)
     # name -> (true, display factor, unit, bound: relative or absolute in display units)
     rows = {"speed": (mismatch.wheel_radius_scale, 1.0, "x", None),
             "gyro_bias": (mismatch.gyro_bias, deg, "deg/s", 0.05),
-            "ay_bias": (mismatch.ay_bias - mismatch.bank_acceleration, 1.0, "m/s^2", 0.03),
-            "steering_offset": (mismatch.steering_offset, deg, "deg", 0.2),
+            "ay_bias": (ay_bias, 1.0, "m/s^2", 0.03),
+            "steering_offset": (steering_offset, deg, "deg", 0.2),
             "ratio": (mismatch.steering_ratio_scale, 1.0, "x", None),
             "understeer": (true_vehicle(config.vehicle, mismatch).understeer_gradient, 1.0, "s^2/m", None),
             "ax_bias": (DEFAULT_SENSORS["ax"].bias, 1.0, "m/s^2", 0.03),
@@ -145,8 +146,8 @@ def online(config, duration: float, bank_deg: float, workdir: Path, attitude=(0.
                      ["the true car and sensor biases (tools/calibration.py --online)"])
     exact = rmse(without_learning(load_config(true_config)), log, truth, skip=60.0)
     start = dict(zip(NAMES, (p.start for p in parameters(config.vehicle))))
-    print(f"online calibration, road {seed}, bank {bank_deg:+g} deg, IMU vibration {vibration:g} (ay_bias is the bias "
-          "less g sin(bank): one sum)")
+    print(f"online calibration, road {seed}, bank {bank_deg:+g} deg, IMU vibration {vibration:g} (true: the "
+          "equivalent flat road's steering offset and ay bias, which hold the bank)")
     print(f"{'parameter':<16} {'unit':<6} {'true':>9} {'config':>9} " +
           " ".join(f"{f'at {m:g} s':>20}" for m in snapshots) + "   error at 60 s (bound)")
     for name, (true, factor, unit, bound) in rows.items():

@@ -8,7 +8,10 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from canest.calibration import SHARED
 from canest.params import VehicleParams
+
+BOUNDS = {p.name: (p.low, p.high) for p in SHARED}  # the sensor and steering parameters': the offline fit's
 
 
 @dataclass(frozen=True)
@@ -31,12 +34,12 @@ def parameters(vehicle: VehicleParams, gyro_bias_std: float = 0.0) -> tuple:
     ``estimator.gyro_bias_std``, rad/s), whose place their learned std takes once applied."""
     deg = math.radians(1.0)
     return (
-        Learned("speed", 1.0, max(0.03, vehicle.wheel_radius_uncertainty), 0.8, 1.25, 0.001, 0.005, 0.01),
-        Learned("gyro_bias", 0.0, max(0.5 * deg, gyro_bias_std), -5.0 * deg, 5.0 * deg, 0.01 * deg, 0.15 * deg,
+        Learned("speed", 1.0, max(0.03, vehicle.wheel_radius_uncertainty), *BOUNDS["speed"], 0.001, 0.005, 0.01),
+        Learned("gyro_bias", 0.0, max(0.5 * deg, gyro_bias_std), *BOUNDS["gyro_bias"], 0.01 * deg, 0.15 * deg,
                 0.1 * deg),
-        Learned("ay_bias", 0.0, 0.3, -2.0, 2.0, 0.01, 0.05, 0.1),
-        Learned("steering_offset", 0.0, 2.0 * deg, -30.0 * deg, 30.0 * deg, 0.05 * deg, 0.2 * deg, 1.0 * deg),
-        Learned("ratio", 1.0, 0.1, 0.5, 2.0, 0.002, 0.03, 0.025),
+        Learned("ay_bias", 0.0, 0.3, *BOUNDS["ay_bias"], 0.01, 0.05, 0.1),
+        Learned("steering_offset", 0.0, 2.0 * deg, *BOUNDS["steering_offset"], 0.05 * deg, 0.2 * deg, 1.0 * deg),
+        Learned("ratio", 1.0, 0.1, *BOUNDS["ratio"], 0.002, 0.03, 0.025),
         Learned("understeer", vehicle.understeer_gradient, 0.003, -0.01, 0.02, 0.0001, 0.0005, 0.0),
         Learned("ax_bias", 0.0, 0.3, -2.0, 2.0, 0.01, 0.03, 0.1),
         Learned("front", 1.0, 0.3, 0.5, 2.0, 0.02, 0.05, 0.05),

@@ -12,7 +12,8 @@ the tires' force, does not see), and the body's roll and pitch gradients its acc
 (:mod:`canest.models.attitude`; deg/g, None: the config's). :func:`true_vehicle` gives the parameters of the
 car the plant drives, as a config would state them were it right, :func:`true_fit` the
 calibration that would be exact. :func:`drawn_mismatch` draws a car as wrong as its config admits, the
-honesty grid's test of whether the published standard deviations cover a real car's error.
+honesty grid's test of whether the published standard deviations cover a real car's error;
+:func:`flat_road_offsets` the offsets a banked road shows as.
 """
 from __future__ import annotations
 
@@ -103,6 +104,17 @@ def true_vehicle(config_vehicle: VehicleParams, mismatch: PlantMismatch,
         **{f"accelerometer_{axis}_gradient": value for axis, value in (("roll", mismatch.roll_gradient),
                                                                         ("pitch", mismatch.pitch_gradient))
            if value is not None})
+
+
+def flat_road_offsets(config_vehicle: VehicleParams, mismatch: PlantMismatch) -> tuple:
+    """The steering offset (rad) and the ay bias (m/s^2) of the *equivalent flat road*: the steady single-track
+    equations hold a bank only in them, as ``offset - R K_us g sin(bank)`` and ``bias - g sin(bank)`` (the
+    tires carry ``m (v r - g sin(bank))``, the accelerometer reads their force), so these are what a calibration
+    can learn on this road (README "Online calibration"); ``R`` and ``K_us`` the car's own."""
+    truth = true_vehicle(config_vehicle, mismatch)
+    side = mismatch.bank_acceleration
+    return ((mismatch.steering_offset or 0.0) - truth.steering_ratio * truth.understeer_gradient * side,
+            (mismatch.ay_bias or 0.0) - side)
 
 
 def true_fit(config_vehicle: VehicleParams, mismatch: PlantMismatch, banks=(0.0,)) -> Fit:
