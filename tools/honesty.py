@@ -54,8 +54,9 @@ class Case:
     vibration: float = 0.0  # scale of the IMU's body vibration and road spikes (canest.sim.sensors; 0 none)
     car: str = "exact"  # "exact": the config's car; "drawn": per seed, one as wrong as the config admits
 
-    def mismatch(self, vehicle) -> PlantMismatch:
-        return drawn_mismatch(vehicle, self.seed) if self.car == "drawn" else PlantMismatch()
+    def mismatch(self, config) -> PlantMismatch:
+        return (drawn_mismatch(config.vehicle, self.seed, config.estimator.gyro_bias_std) if self.car == "drawn"
+                else PlantMismatch())
 
     @property
     def key(self) -> str:
@@ -70,7 +71,7 @@ def drive(config, case: Case, workdir: Path):
     if not truth.exists():
         try:
             sim = simulate(config, case.maneuver, case.speed, case.mu, seed=case.seed, duration=case.duration,
-                           vibration=case.vibration, mismatch=case.mismatch(config.vehicle))
+                           vibration=case.vibration, mismatch=case.mismatch(config))
         except SimulationError:
             return None
         sim.write_log(log)
@@ -164,7 +165,8 @@ def parse_args(argv=None):
     p.add_argument("--car", choices=("exact", "drawn"), default="exact",
                    help="exact: the simulated car is the config's (default); drawn: each seed drives a car as wrong as "
                         "the config admits (cornering stiffnesses off by its cornering_stiffness_uncertainty, "
-                        "accelerometer and gyro biases: canest.sim.mismatch.drawn_mismatch)")
+                        "accelerometer and gyro biases, the gyro's also by estimator.gyro_bias_std, the wheel radius by "
+                        "wheel_radius_uncertainty: canest.sim.mismatch.drawn_mismatch)")
     p.add_argument("--config", default=str(DEFAULT_CONFIG), help="vehicle config (default: the built-in one)")
     p.add_argument("--workdir", default="honesty-work", help="cache of simulated drives (default ./honesty-work)")
     p.add_argument("--jobs", type=int, default=1, help="cases in parallel processes (default 1)")

@@ -72,11 +72,12 @@ STIFFNESS_SCALE_LIMITS = (0.5, 1.5)
 RADIUS_SCALE_LIMITS = next((p.low, p.high) for p in SHARED if p.name == "speed")  # what a calibration may find
 
 
-def drawn_mismatch(config_vehicle: VehicleParams, seed: int) -> PlantMismatch:
+def drawn_mismatch(config_vehicle: VehicleParams, seed: int, gyro_bias_std: float = 0.0) -> PlantMismatch:
     """A car as wrong as its config admits, the same for every run of ``seed``: each axle's cornering stiffness
     scaled by ``1 + e N(0, 1)`` (``e`` the config's ``cornering_stiffness_uncertainty``, within
     :data:`STIFFNESS_SCALE_LIMITS`), lateral accelerometer and gyro biases drawn with :data:`DRAWN_AY_BIAS` and
-    :data:`DRAWN_GYRO_BIAS`, the wheel radius scaled by ``1 + e_r N(0, 1)`` (``e_r`` the config's
+    ``hypot(DRAWN_GYRO_BIAS, gyro_bias_std)`` (the config's ``estimator.gyro_bias_std``: a bias beyond what its
+    gyro noise admits), the wheel radius scaled by ``1 + e_r N(0, 1)`` (``e_r`` the config's
     ``wheel_radius_uncertainty``, within :data:`RADIUS_SCALE_LIMITS`; the fifth draw, so a config claiming 0 draws
     the cars it drew before)."""
     normal = np.random.default_rng([seed, 8855]).standard_normal(5)
@@ -85,7 +86,7 @@ def drawn_mismatch(config_vehicle: VehicleParams, seed: int) -> PlantMismatch:
     return PlantMismatch(stiffness_scale_front=float(scale[0]), stiffness_scale_rear=float(scale[1]),
                          wheel_radius_scale=float(np.clip(1.0 + config_vehicle.wheel_radius_uncertainty * normal[4],
                                                           *RADIUS_SCALE_LIMITS)),
-                         ay_bias=float(DRAWN_AY_BIAS * normal[2]), gyro_bias=float(DRAWN_GYRO_BIAS * normal[3]))
+                         ay_bias=float(DRAWN_AY_BIAS * normal[2]), gyro_bias=float(math.hypot(DRAWN_GYRO_BIAS, gyro_bias_std) * normal[3]))
 
 
 def true_vehicle(config_vehicle: VehicleParams, mismatch: PlantMismatch,
