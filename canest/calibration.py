@@ -30,6 +30,7 @@ SHARED = (
     Parameter("ay_bias", 0.0, 0.05, -2.0, 2.0),
     Parameter("speed", 1.0, 0.01, 0.8, 1.25),
 )
+BOUNDS = {p.name: (p.low, p.high) for p in SHARED}  # name -> (low, high): what a calibration may find
 BANK = Parameter("bank", 0.0, math.radians(0.5), -math.radians(15.0), math.radians(15.0))
 STIFFNESSES = ("front", "rear")
 CONFIDENCE = 1.96  # a 95 % two-sided interval in standard deviations

@@ -8,10 +8,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from canest.calibration import SHARED
+from canest.calibration import BOUNDS  # the sensor and steering parameters' are the offline fit's
 from canest.params import VehicleParams
-
-BOUNDS = {p.name: (p.low, p.high) for p in SHARED}  # the sensor and steering parameters': the offline fit's
 
 
 @dataclass(frozen=True)

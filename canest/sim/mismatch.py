@@ -23,7 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from canest.calibration import SHARED, Fit
+from canest.calibration import BOUNDS, SHARED, Fit
 from canest.models.wheels import GRAVITY, WheelGeometry
 from canest.params import VehicleParams
 from canest.sim.sensors import DEFAULT_SENSORS, SensorError
@@ -69,7 +69,7 @@ class PlantMismatch:
 DRAWN_AY_BIAS = 0.1  # m/s^2, std: a production ESC accelerometer's residual offset plus a road's crown (2 % is 0.2)
 DRAWN_GYRO_BIAS = math.radians(0.05)  # rad/s, std: what the built-in config's gyro noise (0.11 deg/s) leaves for bias
 STIFFNESS_SCALE_LIMITS = (0.5, 1.5)
-RADIUS_SCALE_LIMITS = next((p.low, p.high) for p in SHARED if p.name == "speed")  # what a calibration may find
+RADIUS_SCALE_LIMITS = BOUNDS["speed"]  # what a calibration may find
 
 
 def drawn_mismatch(config_vehicle: VehicleParams, seed: int, gyro_bias_std: float = 0.0) -> PlantMismatch:
@@ -86,7 +86,8 @@ def drawn_mismatch(config_vehicle: VehicleParams, seed: int, gyro_bias_std: floa
     return PlantMismatch(stiffness_scale_front=float(scale[0]), stiffness_scale_rear=float(scale[1]),
                          wheel_radius_scale=float(np.clip(1.0 + config_vehicle.wheel_radius_uncertainty * normal[4],
                                                           *RADIUS_SCALE_LIMITS)),
-                         ay_bias=float(DRAWN_AY_BIAS * normal[2]), gyro_bias=float(math.hypot(DRAWN_GYRO_BIAS, gyro_bias_std) * normal[3]))
+                         ay_bias=float(DRAWN_AY_BIAS * normal[2]),
+                         gyro_bias=float(math.hypot(DRAWN_GYRO_BIAS, gyro_bias_std) * normal[3]))
 
 
 def true_vehicle(config_vehicle: VehicleParams, mismatch: PlantMismatch,
@@ -108,16 +109,17 @@ def true_vehicle(config_vehicle: VehicleParams, mismatch: PlantMismatch,
 
 
 def flat_road_offsets(config_vehicle: VehicleParams, mismatch: PlantMismatch) -> tuple:
-    """The steering offset (rad) and the ay bias (m/s^2) of the *equivalent flat road*: the steady single-track
-    equations hold a bank only in them, as ``offset - R K_us g sin(bank)`` and ``bias - g sin(bank)`` (the
-    tires carry ``m (v r - g sin(bank))``, the accelerometer reads their force), so these are what a calibration
-    can learn on this road (README "Online calibration"); ``R`` and ``K_us`` the car's own. Linear tires': with
-    the plant's curve under the bank's side force, the offline fit over 120 s and the online calibration find
-    0.1-0.3 deg more (3 deg of bank: -2.45 to -2.67 where this gives -2.38)."""
+    """The steering offset (rad) and the ay bias (m/s^2) of the *equivalent flat road*: in the steady single-track
+    equations a bank shows only as a change of these two, ``offset - R K_us g sin(bank)`` and ``bias - g
+    sin(bank)`` (the tires carry ``m (v r - g sin(bank))``, the accelerometer reads their force), so these are
+    what a calibration can learn on this road (README "Online calibration"); ``R`` and ``K_us`` the car's own, the
+    biases the sensors' (:meth:`PlantMismatch.sensor_errors`). Linear tires': with the plant's curve under the
+    bank's side force, the offline fit over 120 s finds 0.2-0.3 deg more (3 deg of bank, seeds 8 and 9: -2.67
+    and -2.57 where this gives -2.38)."""
     truth = true_vehicle(config_vehicle, mismatch)
-    side = mismatch.bank_acceleration
-    return ((mismatch.steering_offset or 0.0) - truth.steering_ratio * truth.understeer_gradient * side,
-            (mismatch.ay_bias or 0.0) - side)
+    errors, side = mismatch.sensor_errors(), mismatch.bank_acceleration
+    return (errors["steering_wheel_angle"].bias - truth.steering_ratio * truth.understeer_gradient * side,
+            errors["ay"].bias - side)
 
 
 def true_fit(config_vehicle: VehicleParams, mismatch: PlantMismatch, banks=(0.0,)) -> Fit:
@@ -128,8 +130,8 @@ def true_fit(config_vehicle: VehicleParams, mismatch: PlantMismatch, banks=(0.0,
     values = {"front": truth.cornering_stiffness_front / config_vehicle.cornering_stiffness_front,
               "rear": truth.cornering_stiffness_rear / config_vehicle.cornering_stiffness_rear,
               "ratio": mismatch.steering_ratio_scale, "speed": mismatch.wheel_radius_scale,
-              "steering_offset": mismatch.steering_offset or 0.0, "gyro_bias": mismatch.gyro_bias or 0.0,
-              "ay_bias": mismatch.ay_bias or 0.0}
+              **{name: mismatch.sensor_errors()[sensor].bias for name, sensor in
+                 (("steering_offset", "steering_wheel_angle"), ("gyro_bias", "yaw_rate"), ("ay_bias", "ay"))}}
     names = [*(p.name for p in SHARED), *(f"bank[{i}]" for i in range(len(banks)))]
     return Fit(names, np.array([*(values[p.name] for p in SHARED), *banks]), np.zeros(len(names)),
                np.eye(len(names)), {}, 0.0)
