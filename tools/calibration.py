@@ -112,7 +112,7 @@ def online(config, duration: float, bank_deg: float, workdir: Path, attitude=(0.
     steering_offset, ay_bias = flat_road_offsets(config.vehicle, mismatch)
     # name -> (true, display factor, unit, bound: relative or absolute in display units)
     rows = {"speed": (mismatch.wheel_radius_scale, 1.0, "x", None),
-            "gyro_bias": (mismatch.gyro_bias, deg, "deg/s", 0.05),
+            "gyro_bias": (mismatch.biases()["gyro_bias"], deg, "deg/s", 0.05),
             "ay_bias": (ay_bias, 1.0, "m/s^2", 0.03),
             "steering_offset": (steering_offset, deg, "deg", 0.2),
             "ratio": (mismatch.steering_ratio_scale, 1.0, "x", None),

@@ -30,6 +30,9 @@ from canest.sim.sensors import DEFAULT_SENSORS, SensorError
 from canest.sim.tire import TireParams
 
 
+BIASED_SENSORS = {"steering_offset": "steering_wheel_angle", "gyro_bias": "yaw_rate", "ay_bias": "ay"}  # field: sensor
+
+
 @dataclass(frozen=True)
 class PlantMismatch:
     """How the simulated car differs from its config; the defaults change nothing. Angles in rad, SI."""
@@ -54,11 +57,16 @@ class PlantMismatch:
     def sensor_errors(self) -> dict:
         """The sensor error table with the biases this mismatch sets (noise as by default)."""
         errors = dict(DEFAULT_SENSORS)
-        for name, bias in (("steering_wheel_angle", self.steering_offset), ("yaw_rate", self.gyro_bias),
-                           ("ay", self.ay_bias)):
-            if bias is not None:
-                errors[name] = SensorError(errors[name].noise, bias)
+        for field, sensor in BIASED_SENSORS.items():
+            if getattr(self, field) is not None:
+                errors[sensor] = SensorError(errors[sensor].noise, getattr(self, field))
         return errors
+
+    def biases(self) -> dict:
+        """The sensors' biases the plant's car has, by the calibration's names (:data:`BIASED_SENSORS`): this
+        mismatch's, or the simulator's defaults where it leaves them unset."""
+        errors = self.sensor_errors()
+        return {field: errors[sensor].bias for field, sensor in BIASED_SENSORS.items()}
 
     @property
     def bank_acceleration(self) -> float:
@@ -113,13 +121,13 @@ def flat_road_offsets(config_vehicle: VehicleParams, mismatch: PlantMismatch) ->
     equations a bank shows only as a change of these two, ``offset - R K_us g sin(bank)`` and ``bias - g
     sin(bank)`` (the tires carry ``m (v r - g sin(bank))``, the accelerometer reads their force), so these are
     what a calibration can learn on this road (README "Online calibration"); ``R`` and ``K_us`` the car's own, the
-    biases the sensors' (:meth:`PlantMismatch.sensor_errors`). Linear tires': with the plant's curve under the
+    biases the sensors' (:meth:`PlantMismatch.biases`). Linear tires': with the plant's curve under the
     bank's side force, the offline fit over 120 s finds 0.2-0.3 deg more (3 deg of bank, seeds 8 and 9: -2.67
     and -2.57 where this gives -2.38)."""
     truth = true_vehicle(config_vehicle, mismatch)
-    errors, side = mismatch.sensor_errors(), mismatch.bank_acceleration
-    return (errors["steering_wheel_angle"].bias - truth.steering_ratio * truth.understeer_gradient * side,
-            errors["ay"].bias - side)
+    biases, side = mismatch.biases(), mismatch.bank_acceleration
+    return (biases["steering_offset"] - truth.steering_ratio * truth.understeer_gradient * side,
+            biases["ay_bias"] - side)
 
 
 def true_fit(config_vehicle: VehicleParams, mismatch: PlantMismatch, banks=(0.0,)) -> Fit:
@@ -130,8 +138,7 @@ def true_fit(config_vehicle: VehicleParams, mismatch: PlantMismatch, banks=(0.0,
     values = {"front": truth.cornering_stiffness_front / config_vehicle.cornering_stiffness_front,
               "rear": truth.cornering_stiffness_rear / config_vehicle.cornering_stiffness_rear,
               "ratio": mismatch.steering_ratio_scale, "speed": mismatch.wheel_radius_scale,
-              **{name: mismatch.sensor_errors()[sensor].bias for name, sensor in
-                 (("steering_offset", "steering_wheel_angle"), ("gyro_bias", "yaw_rate"), ("ay_bias", "ay"))}}
+              **mismatch.biases()}
     names = [*(p.name for p in SHARED), *(f"bank[{i}]" for i in range(len(banks)))]
     return Fit(names, np.array([*(values[p.name] for p in SHARED), *banks]), np.zeros(len(names)),
                np.eye(len(names)), {}, 0.0)
