@@ -13,11 +13,25 @@ both axles' cornering stiffnesses: the one vehicle parameter that changes in
 service (tire wear, temperature, inflation, load) and that dominates the
 lateral model's error; it rides in the model input ``u[2]``. The parameter
 filter is a random walk ``theta+ = theta`` with ``q_theta`` per second,
-updated with the same measurements through ``C = dh/dtheta`` at the state
-filter's posterior (the decoupled form: the state's own dependence on theta
-through past steps is neglected), and clipped to ``THETA_BOUNDS``. Which
-entry of ``u`` holds ``theta`` is the model's business: ``parameter_index``
-(default the last input).
+updated with the state filter's own innovation (Wan & Nelson's dual EKF: the
+parameter's measurement is ``z = h(x-, theta)``):
+
+    y = z - h(x-, theta),  C = dh/dtheta at (x-, theta)
+    S_theta = C P_theta C^T + H P- H^T + R,  k = P_theta S_theta^-1 C
+    theta += k^T y,  P_theta (1 - k^T C)
+
+the decoupled form: the prior's own dependence on theta through past steps
+is neglected, and the prior's spread ``H P- H^T`` is noise to the parameter
+filter, as in the dual CKF (:mod:`canest.filters.dual`). An earlier form took
+the residual and C at the state filter's *posterior* with R alone: that
+posterior has just absorbed the measurement's noise, so residual and C
+shared it, and an IMU vibrating as on a real car (coloured ay noise) drove
+theta to 1.36-1.59 on the exact car (std 0.03; quiet 0.95-0.97) and the
+sideslip outside 2 std on 27-94 % of its ticks. Honesty grid (3 seeds),
+sideslip RMSE before -> after: exact car 0.39 -> 0.27 deg,
+vibrating IMU 0.99 -> 0.38, drawn cars 0.38 -> 0.26. theta is clipped to
+``THETA_BOUNDS``. Which entry of ``u`` holds ``theta`` is the model's
+business: ``parameter_index`` (default the last input).
 """
 from __future__ import annotations
 
@@ -48,9 +62,11 @@ class ExtendedKalmanFilter(GaussianFilter):
         return y, symmetrize(H @ self.P @ H.T + R), H
 
     def update(self, z: np.ndarray, measurement: Measurement, u, R: np.ndarray) -> None:
-        y, S, H = self.innovation(z, measurement, u, R)
-        K = np.linalg.solve(S, H @ self.P).T
-        self.apply_gain(y, S, K, H, R)
+        self.correct(*self.innovation(z, measurement, u, R), R)
+
+    def correct(self, y, S, H, R) -> None:
+        """The Kalman gain and Joseph update for innovation ``y`` of covariance ``S`` and Jacobian ``H``."""
+        self.apply_gain(y, S, np.linalg.solve(S, H @ self.P).T, H, R)
 
 
 class DualExtendedKalmanFilter(ExtendedKalmanFilter):
@@ -76,10 +92,10 @@ class DualExtendedKalmanFilter(ExtendedKalmanFilter):
 
     def update(self, z: np.ndarray, measurement: Measurement, u, R: np.ndarray) -> None:
         u = self._with_theta(u)
-        super().update(z, measurement, u, R)
+        y, S, H = self.innovation(z, measurement, u, R)
         C = measurement.parameter_jacobian(self.x, u)
-        residual = z - measurement.h(self.x[None, :], u)[0]
-        S = self.theta_var * np.outer(C, C) + R
-        gain = self.theta_var * np.linalg.solve(S, C)
-        self.theta = float(np.clip(self.theta + gain @ residual, *THETA_BOUNDS))
+        S_theta = self.theta_var * np.outer(C, C) + S
+        gain = self.theta_var * np.linalg.solve(S_theta, C)
+        self.correct(y, S, H, R)
+        self.theta = float(np.clip(self.theta + gain @ y, *THETA_BOUNDS))
         self.theta_var = max(self.theta_var * (1.0 - gain @ C), 1e-12)
