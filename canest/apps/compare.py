@@ -75,8 +75,10 @@ def runnable(config: Config, text: str) -> list:
     return run
 
 
-def run_filter(config: Config, log_path, truth: dict, name: str, skip: float = 0.5, **reading) -> FilterRun:
-    """One filter's replay of the log (``reading``: how, see :func:`canest.apps.replay.replay`), scored."""
+def run_filter(config: Config, log_path, truth: dict, name: str, skip: float = 0.5, only_valid: bool = True,
+               **reading) -> FilterRun:
+    """One filter's replay of the log (``reading``: how, see :func:`canest.apps.replay.replay`), scored over its valid
+    ticks (``only_valid``) or all of them."""
     estimates = []
     step_times = []
 
@@ -89,7 +91,7 @@ def run_filter(config: Config, log_path, truth: dict, name: str, skip: float = 0
     for state in estimates[-1].values:
         table[state] = np.array([e.values[state] for e in estimates])
     states = [s for s in DISPLAY if s in table and s in truth and s != "vy"]  # forces and friction where estimated
-    scores = {s.state: s for s in score(table, truth, states, skip=skip)}
+    scores = {s.state: s for s in score(table, truth, states, only_valid, skip)}
     return FilterRun(name, table, scores, float(np.median(step_times)) * 1e6 if step_times else float("nan"), repairs)
 
 
