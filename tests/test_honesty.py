@@ -212,3 +212,18 @@ def test_a_friction_split_on_one_road_is_published_as_uncertain(tmp_path):
               for wheel in ("fl", "fr", "rl", "rr")]
     assert all(score.vbw == 0.0 for score in scores), scores
     assert sum(score.valid for score in scores) / len(scores) > 0.3, scores  # still measured, where it is right
+
+
+def test_the_drives_are_cached_per_simulator_source(tmp_path):
+    """A grid run after the plant changed simulated it anew: the cache folder is named by the config and the files
+    the simulator imports, not the estimators' (whose changes are what the grid measures)."""
+    sources = {path.relative_to(ROOT).as_posix() for path in honesty.simulator_sources()}
+    assert {"canest/sim/plant.py", "canest/sim/sensors.py", "canest/models/tire.py", "dbc/canest_vehicle.dbc"} <= sources
+    assert not any(name.startswith(("canest/filters/", "canest/apps/")) for name in sources)
+    assert "canest/estimation/core.py" not in sources
+    plant = tmp_path / "plant.py"
+    plant.write_text("MU = 0.85\n")
+    before = honesty.cache_folder(tmp_path, CONFIG, [plant])
+    assert honesty.cache_folder(tmp_path, CONFIG, [plant]) == before
+    plant.write_text("MU = 0.35\n")
+    assert honesty.cache_folder(tmp_path, CONFIG, [plant]) != before

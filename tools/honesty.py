@@ -8,7 +8,7 @@
     python tools/honesty.py --filters all --seeds 3 --car drawn   # each seed a car as wrong as its config admits
 
 For every case of maneuvers x speeds x frictions x noise seeds it simulates
-one drive (cached in ``--workdir``), replays it with every filter (each on
+one drive (cached in ``--workdir`` per config and simulator source), replays it with every filter (each on
 the model the catalog gives it, as ``canest compare`` does) and pools, per
 filter and published state (vx, yaw rate, sideslip, and forces and frictions
 where estimated), the sums of :func:`canest.apps.evaluate.counts`: RMSE of the
@@ -24,13 +24,15 @@ import dataclasses
 import hashlib
 import json
 import math
+import subprocess
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
 from canest.apps.compare import runnable, with_filter  # noqa: E402
 from canest.apps.evaluate import DISPLAY, counts, pool, read_table, summarize  # noqa: E402
 from canest.apps.replay import replay  # noqa: E402
@@ -42,6 +44,7 @@ from canest.sim.simulate import simulate  # noqa: E402
 SKIP = 0.5  # s of filter convergence left out, as canest evaluate
 SMALL = {"maneuvers": "sine,step", "mu": "0.35,0.85", "seeds": 1, "duration": 4.0}
 STATES = [s for s in DISPLAY if s != "vy"]
+SIMULATOR = ("canest.sim.simulate", "canest.sim.mismatch")  # the modules the drives are made with
 
 
 @dataclasses.dataclass(frozen=True)
@@ -63,6 +66,26 @@ class Case:
         length = f"-{self.duration:g}s" if self.duration else ""
         car = "" if self.car == "exact" else f"-{self.car}"
         return f"{self.maneuver}-{self.speed:g}kmh-mu{self.mu:g}-s{self.seed}{length}-vib{self.vibration:g}{car}"
+
+
+def simulator_sources() -> list:
+    """The files the simulated drives are made of: every canest module the simulator imports (asked of a fresh
+    interpreter: this tool imports the estimators too, whose changes leave the drives as they are) and canest's
+    DBCs."""
+    listing = (f"import sys, {', '.join(SIMULATOR)}; print('\\n'.join(sorted(m.__file__ for n, m in sys.modules.items()"
+               f" if n.split('.')[0] == 'canest')))")
+    files = subprocess.run([sys.executable, "-c", listing], cwd=ROOT, capture_output=True, text=True,
+                           check=True).stdout.split()
+    return [Path(f) for f in files] + sorted(ROOT.glob("dbc/*.dbc"))
+
+
+def cache_folder(workdir: Path, config: Path, sources) -> Path:
+    """Where a config's drives are cached: a folder named by the config's bytes and the simulator's ``sources`` (a
+    changed plant, sensor or DBC simulates anew; the config's ``vehicle.*_uncertainty`` draws the drawn cars)."""
+    digest = hashlib.sha1(config.read_bytes())
+    for path in sources:
+        digest.update(path.read_bytes())
+    return workdir / digest.hexdigest()[:8]
 
 
 def drive(config, case: Case, workdir: Path):
@@ -168,7 +191,7 @@ def parse_args(argv=None):
                         "accelerometer and gyro biases, the gyro's also by estimator.gyro_bias_std, the wheel radius by "
                         "wheel_radius_uncertainty: canest.sim.mismatch.drawn_mismatch)")
     p.add_argument("--config", default=str(DEFAULT_CONFIG), help="vehicle config (default: the built-in one)")
-    p.add_argument("--workdir", default="honesty-work", help="cache of simulated drives (default ./honesty-work)")
+    p.add_argument("--workdir", default="honesty-work", help="cache of simulated drives, per config and simulator source (default ./honesty-work)")
     p.add_argument("--jobs", type=int, default=1, help="cases in parallel processes (default 1)")
     p.add_argument("--json", action="store_true", help="print JSON instead of the markdown table")
     p.add_argument("--small", action="store_true", help="quick subset: sine, step; mu 0.35, 0.85; 1 seed; 4 s")
@@ -186,7 +209,7 @@ def main(argv=None) -> int:
     except CanestError as exc:
         print(exc, file=sys.stderr)
         return 2
-    workdir = Path(args.workdir) / hashlib.sha1(config.read_bytes()).hexdigest()[:8]
+    workdir = cache_folder(Path(args.workdir), config, simulator_sources())
     cases = cases_of(args)
     started = time.perf_counter()
     results = grid(config, filters, cases, workdir, args.jobs, report=lambda text: print(text, file=sys.stderr))
