@@ -24,16 +24,17 @@ in the decoupled form: C is the direct derivative, the prior's own
 dependence on theta (through this and earlier predictions, Wan & Nelson's
 ``H dx-/dtheta``) is neglected, and the prior's spread ``H P- H^T`` is noise
 to the parameter filter, as in the dual CKF (:mod:`canest.filters.dual`).
-The estimator says when theta is excited (:attr:`learning`; the single-track
-binding: while the car turns): otherwise its gain is zero, its value held and
-its variance growing with the random walk. On a straight ``C`` is the
-prior's noise, and an ay noise correlated over more than a tick (a vibrating
-body) is in both the prior and the measurement: learning there drove theta
-to its lower bound 0.3 on a vibrating launch of the exact car (true 1).
+The estimator says when theta may learn (:attr:`learning`; the single-track
+binding: once the accelerometers' noise is measured): otherwise its gain is
+zero and its value held. Its variance grows with the random walk but never
+beyond the initial ``theta_std^2``, the widest its prior is (as a friction's,
+:mod:`canest.filters.parameters`): held over 600 s it grew without bound, and
+the next vibrating bend swung theta between 0.44 and 1.41.
 An earlier form took the residual and C at the state filter's *posterior*
 with R alone: that posterior had just taken in the measurement's noise, and
-on the vibrating honesty grid theta ran to 1.36-1.59 (quiet 0.97-1.01), the
-sideslip outside 2 std on 8-67 % of single drives' valid ticks. theta is
+on the vibrating honesty grid's drives on 0.85 theta ran to 1.35-1.79
+(per-drive medians; quiet 0.93-1.07), the sideslip outside 2 std on 8-67 %
+of single drives' valid ticks. theta is
 clipped to ``THETA_BOUNDS``. Which entry of ``u`` holds ``theta`` is the
 model's business: ``parameter_index`` (default the last input).
 """
@@ -82,9 +83,9 @@ class DualExtendedKalmanFilter(ExtendedKalmanFilter):
         super().__init__(x0, P0)
         self.parameter_index = parameter_index
         self.theta = float(theta0)
-        self.theta_var = theta_std**2
+        self.theta_var = self.theta_cap = theta_std**2
         self.theta_q = theta_noise**2
-        self.learning = True  # set by the estimator: False while theta is not excited
+        self.learning = True  # set by the estimator: False while theta may not learn
 
     def _with_theta(self, u):
         u = np.array(u, dtype=float)
@@ -93,7 +94,7 @@ class DualExtendedKalmanFilter(ExtendedKalmanFilter):
 
     def predict(self, transition: Transition, u, dt: float, Q: np.ndarray) -> None:
         super().predict(transition, self._with_theta(u), dt, Q)
-        self.theta_var += self.theta_q * dt
+        self.theta_var = min(self.theta_var + self.theta_q * dt, self.theta_cap)
 
     def update(self, z: np.ndarray, measurement: Measurement, u, R: np.ndarray) -> None:
         u = self._with_theta(u)
