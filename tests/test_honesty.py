@@ -215,15 +215,19 @@ def test_a_friction_split_on_one_road_is_published_as_uncertain(tmp_path):
 
 
 def test_the_drives_are_cached_per_simulator_source(tmp_path):
-    """A grid run after the plant changed simulated it anew: the cache folder is named by the config and the files
-    the simulator imports, not the estimators' (whose changes are what the grid measures)."""
-    sources = {path.relative_to(ROOT).as_posix() for path in honesty.simulator_sources()}
-    assert {"canest/sim/plant.py", "canest/sim/sensors.py", "canest/models/tire.py", "dbc/canest_vehicle.dbc"} <= sources
+    """The cache folder of the tools' drives is named by the config, its input DBC and the files the simulator
+    imports and the config loader, not the estimators' (whose changes are what the grid measures): keyed by the
+    config alone, a changed plant replayed stale drives."""
+    import drive_cache
+
+    sources = {path.relative_to(ROOT).as_posix() for path in drive_cache.simulator_sources()}
+    assert {"canest/sim/plant.py", "canest/sim/sensors.py", "canest/models/tire.py", "canest/config/vehicle.py"} <= sources
     assert not any(name.startswith(("canest/filters/", "canest/apps/")) for name in sources)
     assert "canest/estimation/core.py" not in sources
-    plant = tmp_path / "plant.py"
+    plant, dbc = tmp_path / "plant.py", load_config(CONFIG).input_dbc
     plant.write_text("MU = 0.85\n")
-    before = honesty.cache_folder(tmp_path, CONFIG, [plant])
-    assert honesty.cache_folder(tmp_path, CONFIG, [plant]) == before
+    before = drive_cache.folder(tmp_path, CONFIG, dbc, [plant])
+    assert drive_cache.folder(tmp_path, CONFIG, dbc, [plant]) == before
     plant.write_text("MU = 0.35\n")
-    assert honesty.cache_folder(tmp_path, CONFIG, [plant]) != before
+    assert drive_cache.folder(tmp_path, CONFIG, dbc, [plant]) != before
+    assert drive_cache.folder(tmp_path, CONFIG, ROOT / "dbc" / "production_example.dbc", [plant]) != before

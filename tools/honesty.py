@@ -8,7 +8,7 @@
     python tools/honesty.py --filters all --seeds 3 --car drawn   # each seed a car as wrong as its config admits
 
 For every case of maneuvers x speeds x frictions x noise seeds it simulates
-one drive (cached in ``--workdir`` per config and simulator source), replays it with every filter (each on
+one drive (cached in ``--workdir``: tools/drive_cache.py), replays it with every filter (each on
 the model the catalog gives it, as ``canest compare`` does) and pools, per
 filter and published state (vx, yaw rate, sideslip, and forces and frictions
 where estimated), the sums of :func:`canest.apps.evaluate.counts`: RMSE of the
@@ -21,18 +21,15 @@ from __future__ import annotations
 import argparse
 import concurrent.futures
 import dataclasses
-import hashlib
 import json
 import math
-import subprocess
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from canest.apps.compare import runnable, with_filter  # noqa: E402
 from canest.apps.evaluate import DISPLAY, counts, pool, read_table, summarize  # noqa: E402
 from canest.apps.replay import replay  # noqa: E402
@@ -40,11 +37,11 @@ from canest.config import DEFAULT_CONFIG, load_config  # noqa: E402
 from canest.errors import CanestError, SimulationError  # noqa: E402
 from canest.sim.mismatch import PlantMismatch, drawn_mismatch  # noqa: E402
 from canest.sim.simulate import simulate  # noqa: E402
+from drive_cache import folder, simulator_sources  # noqa: E402  (tools/, beside this file)
 
 SKIP = 0.5  # s of filter convergence left out, as canest evaluate
 SMALL = {"maneuvers": "sine,step", "mu": "0.35,0.85", "seeds": 1, "duration": 4.0}
 STATES = [s for s in DISPLAY if s != "vy"]
-SIMULATOR = ("canest.sim.simulate", "canest.sim.mismatch")  # the modules the drives are made with
 
 
 @dataclasses.dataclass(frozen=True)
@@ -66,26 +63,6 @@ class Case:
         length = f"-{self.duration:g}s" if self.duration else ""
         car = "" if self.car == "exact" else f"-{self.car}"
         return f"{self.maneuver}-{self.speed:g}kmh-mu{self.mu:g}-s{self.seed}{length}-vib{self.vibration:g}{car}"
-
-
-def simulator_sources() -> list:
-    """The files the simulated drives are made of: every canest module the simulator imports (asked of a fresh
-    interpreter: this tool imports the estimators too, whose changes leave the drives as they are) and canest's
-    DBCs."""
-    listing = (f"import sys, {', '.join(SIMULATOR)}; print('\\n'.join(sorted(m.__file__ for n, m in sys.modules.items()"
-               f" if n.split('.')[0] == 'canest')))")
-    files = subprocess.run([sys.executable, "-c", listing], cwd=ROOT, capture_output=True, text=True,
-                           check=True).stdout.split()
-    return [Path(f) for f in files] + sorted(ROOT.glob("dbc/*.dbc"))
-
-
-def cache_folder(workdir: Path, config: Path, sources) -> Path:
-    """Where a config's drives are cached: a folder named by the config's bytes and the simulator's ``sources`` (a
-    changed plant, sensor or DBC simulates anew; the config's ``vehicle.*_uncertainty`` draws the drawn cars)."""
-    digest = hashlib.sha1(config.read_bytes())
-    for path in sources:
-        digest.update(path.read_bytes())
-    return workdir / digest.hexdigest()[:8]
 
 
 def drive(config, case: Case, workdir: Path):
@@ -205,11 +182,12 @@ def main(argv=None) -> int:
     args = parse_args(argv)
     config = Path(args.config).resolve()
     try:
-        filters = runnable(load_config(config), args.filters)
+        loaded = load_config(config)
+        filters = runnable(loaded, args.filters)
     except CanestError as exc:
         print(exc, file=sys.stderr)
         return 2
-    workdir = cache_folder(Path(args.workdir), config, simulator_sources())
+    workdir = folder(Path(args.workdir), config, loaded.input_dbc, simulator_sources())
     cases = cases_of(args)
     started = time.perf_counter()
     results = grid(config, filters, cases, workdir, args.jobs, report=lambda text: print(text, file=sys.stderr))
