@@ -87,7 +87,8 @@ def test_the_sideslip_on_a_vibrating_imu_is_valid_and_right(vibrating, name):
     kinematic check's tolerance widened by ay's integrated noise and the model error held over the last second,
     it is valid on part of the ticks and none of them is wrong (in these first 4 s ckf's valid sideslip has a NEES of 2.6:
     README "The sideslip on a vibrating IMU"). dekf's was never valid: its stiffness scale, learned from the residual
-    at the posterior that had just taken in ay's coloured noise, ran to 1.4-1.6 (``canest.filters.ekf``)."""
+    at the posterior that had just taken in ay's coloured noise, ran to 1.35-1.79 (per-drive medians on 0.85:
+    ``canest.filters.ekf``)."""
     score = vibrating[name]["beta"]
     assert score.valid > 0.02 and score.vbw <= 0.001 and score.cov2 >= 0.9 and score.cov3 >= 0.98, score
 
@@ -221,7 +222,8 @@ def test_the_drives_are_cached_per_simulator_source(tmp_path):
     import drive_cache
 
     sources = {path.relative_to(ROOT).as_posix() for path in drive_cache.simulator_sources()}
-    assert {"canest/sim/plant.py", "canest/sim/sensors.py", "canest/models/tire.py", "canest/config/vehicle.py"} <= sources
+    made_of = {"canest/sim/plant.py", "canest/sim/sensors.py", "canest/models/tire.py", "canest/config/vehicle.py"}
+    assert made_of <= sources
     assert not any(name.startswith(("canest/filters/", "canest/apps/")) for name in sources)
     assert "canest/estimation/core.py" not in sources
     plant, dbc = tmp_path / "plant.py", load_config(CONFIG).input_dbc

@@ -31,13 +31,15 @@ def test_a_vibrating_imu_loses_no_frame_and_no_divergence_resets_with_its_noise_
 
 def test_the_dual_filter_s_stiffness_scale_stays_near_the_exact_car_s_on_a_vibrating_imu(config):
     """dekf's scale theta of the cornering stiffnesses (exact car: 1, its secant a little lower in bends). Learned
-    from the residual at the posterior, a vibrating IMU drove it to 1.4-1.8; learned before ay's noise was measured
-    (the filter then takes a vibrating ay at the configured noise), to 0.3-0.73 in the first 0.3 s of the drive."""
+    from the residual at the posterior, a vibrating IMU drove it to 1.35-1.79 (per-drive medians on 0.85); learned
+    before ay's noise was measured (the filter then takes a vibrating ay at the configured noise), to 0.3-0.73 in
+    the first 0.3 s of the drive."""
     dual = dataclasses.replace(config, estimator=dataclasses.replace(config.estimator, filter="dekf"))
-    for maneuver, low, high in (("launch", 0.9, 1.2), ("sine", 0.7, 1.2)):
+    for maneuver, low, high, learned_below in (("launch", 0.95, 1.1, None), ("sine", 0.7, 1.2, 0.95)):
         sim = simulate(dual, maneuver, 80.0, 0.85, duration=6.0, seed=1, vibration=1.0)
         pipeline = Pipeline(dual)
         thetas = [pipeline.estimator.filter.theta for frame in sim.frames for _ in pipeline.feed(frame)
                   if pipeline.estimator.filter is not None]
         assert low <= min(thetas) and max(thetas) <= high, (maneuver, min(thetas), max(thetas))
-    assert min(thetas) < 0.95  # it learns: the tires' secant stiffness falls in the sine's bends
+        if learned_below:  # it learns: the tires' secant stiffness falls in the sine's bends
+            assert min(thetas) < learned_below, (maneuver, min(thetas))
