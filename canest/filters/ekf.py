@@ -25,18 +25,18 @@ dependence on theta (through this and earlier predictions, Wan & Nelson's
 ``H dx-/dtheta``) is neglected, and the prior's spread ``H P- H^T`` is noise
 to the parameter filter, as in the dual CKF (:mod:`canest.filters.dual`).
 The estimator says when theta may learn (:attr:`learning`; the single-track
-binding: with the lateral channels in use, once the accelerometers' noise is measured): otherwise its gain is
-zero and its value held. Its variance grows with the random walk but never
-beyond the initial ``theta_std^2``, the widest its prior is (as a friction's,
-:mod:`canest.filters.parameters`): held over 600 s it grew to 0.24 (std 0.49),
-and the next vibrating bend swung theta between 0.44 and 1.41.
-An earlier form took the residual and C at the state filter's *posterior*
-with R alone: that posterior had just taken in the measurement's noise, and
-on the vibrating honesty grid's drives on 0.85 theta ran to 1.35-1.79
-(per-drive medians; quiet 0.93-1.07), the sideslip outside 2 std on 8-67 %
-of single drives' valid ticks. theta is
-clipped to ``THETA_BOUNDS``. Which entry of ``u`` holds ``theta`` is the
-model's business: ``parameter_index`` (default the last input).
+binding: with the lateral channels in use, once the accelerometers' noise is
+measured): otherwise its gain is zero and its value held. Its variance grows
+with the random walk but never beyond the initial ``theta_std^2``, the widest
+its prior is (as a friction's, :mod:`canest.filters.parameters`): held over
+600 s it grew to 0.24 (std 0.49), and the next vibrating bend swung theta
+between 0.44 and 1.41. An earlier form took the residual and C at the state
+filter's *posterior* with R alone: that posterior had just taken in the
+measurement's noise, and on the vibrating honesty grid's drives on 0.85 theta
+ran to 1.35-1.79 (per-drive medians; quiet 0.93-1.07), the sideslip outside
+2 std on 8-67 % of single drives' valid ticks. theta is clipped to
+``THETA_BOUNDS``. Which entry of ``u`` holds ``theta`` is the model's
+business: ``parameter_index`` (default the last input).
 """
 from __future__ import annotations
 
