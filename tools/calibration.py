@@ -42,7 +42,7 @@ from canest.pipeline import Pipeline  # noqa: E402
 from canest.sim.mismatch import PlantMismatch, flat_road_offsets, true_fit, true_vehicle  # noqa: E402
 from canest.sim.sensors import DEFAULT_SENSORS  # noqa: E402
 from canest.sim.simulate import simulate  # noqa: E402
-from drive_cache import folder, simulator_sources  # noqa: E402  (tools/, beside this file)
+from drive_cache import folder  # noqa: E402  (tools/, beside this file)
 
 WRONG = PlantMismatch(0.7, 1.3, 1.08, 1.03, math.radians(1.5), math.radians(0.5), 0.2)
 ROADS = ((3, 3.0), (4, -3.0), (5, 0.0))  # (seed, bank deg)
@@ -212,7 +212,7 @@ def main() -> None:
     if args.vibration < 0.0:
         parser.error(f"--vibration is a scale of at least 0, got {args.vibration}")
     config = load_config(args.config)
-    workdir = folder(Path(args.workdir), Path(args.config), config.input_dbc, simulator_sources())
+    workdir = folder(Path(args.workdir), Path(args.config), config.input_dbc)
     workdir.mkdir(parents=True, exist_ok=True)
     if args.online:
         online(config, args.duration or 120.0, args.bank, workdir, args.attitude, args.seed, args.vibration)

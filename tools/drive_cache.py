@@ -29,10 +29,10 @@ def simulator_sources() -> list:
     return sorted({Path(line) for line in run.stdout.splitlines()} | set(loader))
 
 
-def folder(workdir: Path, config_file: Path, input_dbc: Path, sources) -> Path:
+def folder(workdir: Path, config_file: Path, input_dbc: Path, sources=None) -> Path:
     """The cache folder of a config's drives under ``workdir``: named by the config's bytes, its input DBC's and the
-    ``sources`` (:func:`simulator_sources`)."""
+    ``sources`` (default :func:`simulator_sources`)."""
     digest = hashlib.sha1(Path(config_file).read_bytes())
-    for path in [Path(input_dbc), *sources]:
+    for path in [Path(input_dbc), *(simulator_sources() if sources is None else sources)]:
         digest.update(path.read_bytes())
     return Path(workdir) / digest.hexdigest()[:8]

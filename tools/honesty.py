@@ -37,7 +37,7 @@ from canest.config import DEFAULT_CONFIG, load_config  # noqa: E402
 from canest.errors import CanestError, SimulationError  # noqa: E402
 from canest.sim.mismatch import PlantMismatch, drawn_mismatch  # noqa: E402
 from canest.sim.simulate import simulate  # noqa: E402
-from drive_cache import folder, simulator_sources  # noqa: E402  (tools/, beside this file)
+from drive_cache import folder  # noqa: E402  (tools/, beside this file)
 
 SKIP = 0.5  # s of filter convergence left out, as canest evaluate
 SMALL = {"maneuvers": "sine,step", "mu": "0.35,0.85", "seeds": 1, "duration": 4.0}
@@ -187,7 +187,7 @@ def main(argv=None) -> int:
     except CanestError as exc:
         print(exc, file=sys.stderr)
         return 2
-    workdir = folder(Path(args.workdir), config, loaded.input_dbc, simulator_sources())
+    workdir = folder(Path(args.workdir), config, loaded.input_dbc)
     cases = cases_of(args)
     started = time.perf_counter()
     results = grid(config, filters, cases, workdir, args.jobs, report=lambda text: print(text, file=sys.stderr))

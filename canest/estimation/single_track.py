@@ -26,7 +26,7 @@ class SingleTrackEstimator(Estimator):
         noise measured (:mod:`canest.estimation.measured_noise`): until then the filter takes ay at its configured
         noise, 0.15 m/s^2 where a vibrating body shakes it by 1.4, and in the first 0.3 s of vibrating drives theta
         fell to 0.30-0.73 (its bound 0.3 on one launch of three; true 1) and stayed there."""
-        if hasattr(self.filter, "learning"):  # dekf (the only filter with a parameter in the model input)
+        if "input_parameter" in self.filter.needs:  # dekf: its parameter filter learns theta
             measured = all(noise.std is not None for _, noise in self.accelerometer_rows)
             self.filter.learning = lateral_ok and measured
         return super()._update(channels, inputs, u, lateral_ok, t)
