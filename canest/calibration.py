@@ -40,6 +40,11 @@ CONFIDENCE = 1.96  # a 95 % two-sided interval in standard deviations
 # 60 s roads fitted together read the front 3.0 %, the rear 4.9 % soft; ten roads online after 60 s the rear 1-8 %
 # soft (RMS 4.4 %), the front within 4 %; without it the rear's error was 1.7 (60 s) to 2.5 (120 s) of its std
 STIFFNESS_MODEL_ERROR = 0.05
+# relative, 1 std: the steering ratio's share of the same error (the front stiffness's error goes partly into the
+# ratio, with which it correlates): 30 country roads online (seeds 3-17, flat and banked 3 deg) scattered 1.9-2.5 %
+# in RMS about the truth after 120 s, where the posterior said 1 %; checked on ten more (README "Online calibration")
+RATIO_MODEL_ERROR = 0.02
+MODEL_ERROR = {"front": STIFFNESS_MODEL_ERROR, "rear": STIFFNESS_MODEL_ERROR, "ratio": RATIO_MODEL_ERROR}
 # relative, 1 std: how far a tire's rolling radius moves between drives (pressure, temperature, speed: a few tenths
 # of a percent): beside a fit's own error in ``canest calibrate``'s vehicle.wheel_radius_uncertainty, and added to the
 # online calibration's saved speed scale when it is reloaded
@@ -62,10 +67,11 @@ class Fit:
         return float(self.half_widths[self.names.index(name)])
 
     def with_model_error(self) -> Fit:
-        """A copy whose stiffnesses' intervals also hold :data:`STIFFNESS_MODEL_ERROR`, in quadrature: what the
-        drives' residuals cannot show (a fit's intervals shrink with driving; the linear tires' error does not)."""
+        """A copy whose stiffnesses' and steering ratio's intervals also hold their :data:`MODEL_ERROR`, in
+        quadrature: what the drives' residuals cannot show (a fit's intervals shrink with driving; the linear tires'
+        error does not)."""
         half_widths = self.half_widths.copy()
-        for name in STIFFNESSES:
+        for name, error in MODEL_ERROR.items():
             i = self.names.index(name)
-            half_widths[i] = math.hypot(half_widths[i], CONFIDENCE * STIFFNESS_MODEL_ERROR * self.values[i])
+            half_widths[i] = math.hypot(half_widths[i], CONFIDENCE * error * self.values[i])
         return replace(self, half_widths=half_widths)

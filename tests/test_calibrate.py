@@ -80,9 +80,9 @@ def test_recovers_each_parameter_of_the_wrong_config(calibrated):
         true, got = getattr(truth, key), getattr(fitted.vehicle, key)
         print(f"{key}: true {true:.6g}, calibrated {got:.6g} ({100 * (got / true - 1):+.1f} %)")
         assert abs(got / true - 1.0) < 0.10, key
-    for key in ("cornering_stiffness_front", "cornering_stiffness_rear"):
+    for key in ("cornering_stiffness_front", "cornering_stiffness_rear", "steering_ratio"):
         _, _, value, half, _ = next(line.split() for line in stdout.splitlines() if line.split()[:1] == [key])
-        assert abs(float(value) - getattr(truth, key)) < float(half.removeprefix("+-")), key  # the tires' error
+        assert abs(float(value) - getattr(truth, key)) < float(half.removeprefix("+-")), key  # MODEL_ERROR
     offsets = {"steering_wheel_angle": (math.radians(1.5), math.radians(0.2)),
                "yaw_rate": (math.radians(0.5), math.radians(0.05)), "ay": (0.2, 0.03)}
     for signal, (bias, tolerance) in offsets.items():

@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from canest.calibration import RADIUS_DRIFT, STIFFNESS_MODEL_ERROR, STIFFNESSES
+from canest.calibration import RADIUS_DRIFT, RATIO_MODEL_ERROR, STIFFNESS_MODEL_ERROR, STIFFNESSES
 from canest.config import load_config
 from canest.errors import ConfigError
 from canest.estimation.calibration_blocks import BlockMeans
@@ -358,6 +358,18 @@ def test_the_published_stiffness_std_holds_the_linear_tires_error_that_windows_d
     print(f"understeer: {understeer:.5f} +- {understeer_std:.5f}, true {car.understeer_gradient:.5f}")
     assert abs(understeer - car.understeer_gradient) < 2.0 * understeer_std
     assert understeer_std > 0.05 * car.mass / car.wheelbase * car.cg_to_rear / car.cornering_stiffness_front
+
+
+def test_the_published_ratio_std_holds_the_error_that_driving_does_not_average(learned):
+    """The learned steering ratio's published std never falls below ``RATIO_MODEL_ERROR`` of the value, covers the
+    true factor, and convergence judges the posterior alone."""
+    calibration = learned[0].calibration
+    report, i = calibration.report(), NAMES.index("ratio")
+    value, std = report["calib_ratio"], report["calib_ratio_std"]
+    print(f"ratio: {value:.4f} +- {std:.4f} (posterior {calibration.std[i]:.4f}), true {WRONG.steering_ratio_scale}")
+    assert std == pytest.approx(math.hypot(calibration.std[i], RATIO_MODEL_ERROR * value))
+    assert abs(value - WRONG.steering_ratio_scale) < 2.0 * std
+    assert report["calib_ratio_converged"] == bool(calibration.converged[i])
 
 
 def test_the_stiffnesses_are_learned_from_a_window_of_the_drive_and_reach_the_model(config, learned):

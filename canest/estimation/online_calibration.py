@@ -64,7 +64,7 @@ from types import MappingProxyType
 
 import numpy as np
 
-from canest.calibration import RADIUS_DRIFT, STIFFNESS_MODEL_ERROR, STIFFNESSES
+from canest.calibration import MODEL_ERROR, RADIUS_DRIFT, STIFFNESS_MODEL_ERROR, STIFFNESSES
 from canest.estimation.calibration_blocks import Block, BlockMeans
 from canest.estimation.calibration_state import CalibrationStore
 from canest.estimation.inputs import WHEEL_SPEEDS
@@ -165,15 +165,16 @@ class OnlineCalibration:
 
     @property
     def published_std(self) -> np.ndarray:
-        """:attr:`std` as reported, the stiffnesses' with the linear tires' model error in quadrature
-        (:data:`canest.calibration.STIFFNESS_MODEL_ERROR` of the value: a floor on the posterior, where the window
-        fits' ``FIT_FLOOR`` averages away over windows), and the understeer gradient's with that error carried
-        through ``K_us = m (b / C_f - a / C_r) / L``: ``e m / L hypot(b / C_f, a / C_r)`` (the steering identity
-        that learns it holds the same linear tires; without it, on ten roads after 120 s, its error was 4.2 of its
-        std in RMS). :attr:`converged` judges the evidence alone."""
+        """:attr:`std` as reported, the stiffnesses' and the steering ratio's with the linear tires' model error
+        in quadrature (:data:`canest.calibration.MODEL_ERROR` of the value: a floor on the posterior, where the
+        window fits' ``FIT_FLOOR`` averages away over windows), and the understeer gradient's with the stiffnesses'
+        error carried through ``K_us = m (b / C_f - a / C_r) / L``: ``e m / L hypot(b / C_f, a / C_r)`` (the
+        steering identity that learns it holds the same linear tires; without it, on ten roads after 120 s, its
+        error was 4.2 of its std in RMS). :attr:`converged` judges the evidence alone."""
         std = self.std
-        for i in (FRONT, REAR):
-            std[i] = math.hypot(std[i], STIFFNESS_MODEL_ERROR * self.x[i])
+        for name, error in MODEL_ERROR.items():
+            i = NAMES.index(name)
+            std[i] = math.hypot(std[i], error * self.x[i])
         v = self.vehicle
         front, rear = v.cornering_stiffness_front * self.x[FRONT], v.cornering_stiffness_rear * self.x[REAR]
         tires = STIFFNESS_MODEL_ERROR * v.mass / v.wheelbase * math.hypot(v.cg_to_rear / front, v.cg_to_front / rear)
