@@ -12,6 +12,7 @@ from canest.apps.evaluate import read_table
 from canest.models import two_track
 from canest.pipeline import Pipeline
 from canest.apps.replay import replay
+from canest.estimation.roll_lag import ROLL_LAG, RollLag
 from canest.signals import WHEELS
 from canest.sim.simulate import simulate
 
@@ -185,3 +186,18 @@ def test_the_tire_curves_error_moves_both_wheels_of_an_axle_together(config):
     e = config.vehicle.cornering_stiffness_uncertainty
     decay = np.exp(-rho * estimator.dt)  # per tick, a force keeps this share of its distance to its target
     np.testing.assert_allclose(front[0, 0] / (1 - decay**2), (e * forces[0]) ** 2, rtol=1e-9)
+
+
+def test_the_roll_lag_passes_the_first_sample_and_shakes_less_than_the_accelerometer():
+    """ay as the wheel loads take it: the first sample as it is, a step reached after the lag (1 - 1/e of it,
+    within the discrete steps), white noise at the tick's rate left at ``sqrt(alpha / (2 - alpha))`` of its std."""
+    dt = 0.01
+    lag = RollLag(dt)
+    assert lag.update(2.0) == 2.0
+    steps = [lag.update(3.0) for _ in range(int(round(ROLL_LAG / dt)))]
+    assert 2.5 < steps[-1] < 2.0 + 1.0 - np.exp(-1.0) + 0.05 and np.all(np.diff(steps) > 0)
+    lag.reset()
+    noise = np.random.default_rng(0).normal(0.0, 1.4, 20000)
+    lagged = np.array([lag.update(value) for value in noise])
+    alpha = dt / (ROLL_LAG + dt)
+    assert np.std(lagged[100:]) == pytest.approx(1.4 * np.sqrt(alpha / (2.0 - alpha)), rel=0.05)

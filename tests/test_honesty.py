@@ -204,6 +204,17 @@ def test_the_lateral_forces_std_is_the_tire_curves_error_not_a_random_walks(tmp_
     assert sideslip.valid > 0.3 and sideslip.vbw == 0.0 and 0.5 <= sideslip.nees <= 2.0, sideslip
 
 
+def test_a_vibrating_ay_does_not_move_force_between_an_axle_s_wheels(tmp_path):
+    """The wheel loads took each vibrating ay sample: on this drive the rear left force fell from 1 612 to 826 N in
+    30 ms (the rear right rose by as much; no measurement row sees an axle's split), 4 std off, flagged valid. The
+    loads take ay through the body's roll lag (:mod:`canest.estimation.roll_lag`)."""
+    case = honesty.Case("step", 80.0, 0.85, 2, vibration=1.0)
+    result = honesty.run_case(CONFIG, ["dici-gfckf"], case, tmp_path)
+    scores = [honesty.summarize(f"fy_{wheel}", result["sums"]["dici-gfckf"][f"fy_{wheel}"])
+              for wheel in ("fl", "fr", "rl", "rr")]
+    assert all(score.valid > 0.3 and score.vbw == 0.0 for score in scores), scores
+
+
 def test_a_friction_split_on_one_road_is_published_as_uncertain(tmp_path):
     """A car drawn with its rear stiffness x0.77 (seed 0): the step steer on 0.85 split jckf's rear frictions to
     0.88 and 0.62 in four seconds, the low one flagged valid with a std of 0.07 (22 % of its valid ticks wrong).

@@ -21,6 +21,7 @@ from canest.estimation import validity
 from canest.estimation.core import Estimator
 from canest.estimation.inputs import WHEEL_SPEEDS, TickInputs
 from canest.estimation.reference_speed import TORQUES
+from canest.estimation.roll_lag import RollLag
 from canest.models import tire_force
 from canest.models.tire import relaxation_rate
 from canest.models.tire_force import AxDrivenTireForceModel, TireForceModel
@@ -52,10 +53,12 @@ class TireForceEstimator(Estimator):
         self.sensor_sets = np.array(self.model.sensor_sets)
         self.force_inputs = TORQUES if self.torques else ("ax",)  # what the longitudinal forces come from
         self.wheel_acceleration = WheelAcceleration()
+        self.roll_lag = RollLag(self.dt)
 
     def reset(self) -> None:
         super().reset()
         self.wheel_acceleration.reset()
+        self.roll_lag.reset()
 
     def _initial_state(self, inputs: TickInputs) -> np.ndarray:
         """As the single track, and each lateral force at its load share of ``m ay``."""
@@ -86,13 +89,16 @@ class TireForceEstimator(Estimator):
         return Q
 
     def _control(self, inputs: TickInputs, t: float) -> np.ndarray:
-        """u = (delta, ax, ay, Fx per wheel from eq 4); without motor torques (delta, ax, ay)."""
+        """u = (delta, ax, ay, Fx per wheel from eq 4); without motor torques (delta, ax, ay); ay as the loads
+        take it, through the body's roll lag (:mod:`canest.estimation.roll_lag`)."""
+        ax, ay = accelerations(inputs)
+        loads = (ax, self.roll_lag.update(ay))
         if not self.torques:
-            return np.array([self._road_wheel_angle(inputs), *accelerations(inputs)])
+            return np.array([self._road_wheel_angle(inputs), *loads])
         speeds = [inputs.values.get(name, 0.0) for name in WHEEL_SPEEDS]
         fx = longitudinal_forces(torques(inputs), self.wheel_acceleration.update(t, speeds),
                                  self.vehicle.wheel_inertia, self.vehicle.wheel_radius)
-        return np.array([self._road_wheel_angle(inputs), *accelerations(inputs), *fx])
+        return np.array([self._road_wheel_angle(inputs), *loads, *fx])
 
     def _update(self, channels, inputs: TickInputs, u: np.ndarray, lateral_ok: bool, t: float) -> bool:
         """Non-DICI filters use the first IMU; ``dici-gfckf`` gives local filter j the rows of IMU j."""
