@@ -10,9 +10,9 @@ import pytest
 from canest.apps.compare import with_filter
 from canest.apps.evaluate import read_table
 from canest.models import two_track
+from canest.estimation.roll_lag import ROLL_LAG, RollLag
 from canest.pipeline import Pipeline
 from canest.apps.replay import replay
-from canest.estimation.roll_lag import ROLL_LAG, RollLag
 from canest.signals import WHEELS
 from canest.sim.simulate import simulate
 
@@ -189,15 +189,15 @@ def test_the_tire_curves_error_moves_both_wheels_of_an_axle_together(config):
 
 
 def test_the_roll_lag_passes_the_first_sample_and_shakes_less_than_the_accelerometer():
-    """ay as the wheel loads take it: the first sample as it is, a step reached after the lag (1 - 1/e of it,
-    within the discrete steps), white noise at the tick's rate left at ``sqrt(alpha / (2 - alpha))`` of its std."""
+    """ay as the wheel loads take it: the first sample as it is, a step followed at ``alpha = dt / (ROLL_LAG + dt)``
+    per tick, white noise at the tick's rate left at ``sqrt(alpha / (2 - alpha))`` of its std."""
     dt = 0.01
     lag = RollLag(dt)
     assert lag.update(2.0) == 2.0
     steps = [lag.update(3.0) for _ in range(int(round(ROLL_LAG / dt)))]
-    assert 2.5 < steps[-1] < 2.0 + 1.0 - np.exp(-1.0) + 0.05 and np.all(np.diff(steps) > 0)
+    alpha = dt / (ROLL_LAG + dt)
+    assert steps == pytest.approx([3.0 - (1.0 - alpha) ** (k + 1) for k in range(len(steps))])
     lag.reset()
     noise = np.random.default_rng(0).normal(0.0, 1.4, 20000)
     lagged = np.array([lag.update(value) for value in noise])
-    alpha = dt / (ROLL_LAG + dt)
     assert np.std(lagged[100:]) == pytest.approx(1.4 * np.sqrt(alpha / (2.0 - alpha)), rel=0.05)

@@ -361,8 +361,9 @@ def test_the_published_stiffness_std_holds_the_linear_tires_error_that_windows_d
 
 
 def test_the_published_ratio_std_holds_the_error_that_driving_does_not_average(learned):
-    """The learned steering ratio's published std never falls below ``RATIO_MODEL_ERROR`` of the value, covers the
-    true factor, and convergence judges the posterior alone."""
+    """The learned steering ratio's published std holds ``RATIO_MODEL_ERROR`` of the value in quadrature (on one
+    road it would cover the truth without it; the 40 roads behind the term are in the README), and convergence
+    judges the posterior alone."""
     calibration = learned[0].calibration
     report, i = calibration.report(), NAMES.index("ratio")
     value, std = report["calib_ratio"], report["calib_ratio_std"]

@@ -11,9 +11,11 @@ the rear right rose by as much, 4 std off. A first-order lag::
 
     ay_load[k] = ay_load[k-1] + alpha (ay[k] - ay_load[k-1]),   alpha = dt / (ROLL_LAG + dt)
 
-(the simulator's suspension lags its load transfer by 0.08 s,
+(an e-folding time of ``-dt / ln(1 - alpha)``, 0.055 s at 100 Hz; the
+simulator's suspension lags its load transfer by 0.08 s,
 ``canest.sim.plant.LOAD_TRANSFER_TAU``; a passenger car's roll mode answers
-in about that time). Only ay is lagged: ax also drives the longitudinal forces
+in about that time). A stale ay, or one at its DBC limit, passes as it is
+and the next good sample starts the lag anew. Only ay is lagged: ax also drives the longitudinal forces
 and vx, and the front-rear split it moves is seen by the yaw moment.
 """
 from __future__ import annotations
@@ -22,7 +24,8 @@ ROLL_LAG = 0.05  # s: below the simulator's 0.08, README "How far to trust the o
 
 
 class RollLag:
-    """ay as the wheel loads take it: :data:`ROLL_LAG` behind the measured, starting at the first sample."""
+    """ay as the wheel loads take it: :data:`ROLL_LAG` behind the measured, starting at the first sample (after a
+    :meth:`reset`: the estimator's, or a stale ay)."""
 
     def __init__(self, dt: float):
         self.alpha = dt / (ROLL_LAG + dt)

@@ -92,13 +92,16 @@ class TireForceEstimator(Estimator):
         """u = (delta, ax, ay, Fx per wheel from eq 4); without motor torques (delta, ax, ay); ay as the loads
         take it, through the body's roll lag (:mod:`canest.estimation.roll_lag`)."""
         ax, ay = accelerations(inputs)
-        loads = (ax, self.roll_lag.update(ay))
+        if inputs.has("ay"):
+            ay = self.roll_lag.update(ay)
+        else:
+            self.roll_lag.reset()  # stale (0) or at its DBC limit: as it is; the next good sample starts anew
         if not self.torques:
-            return np.array([self._road_wheel_angle(inputs), *loads])
+            return np.array([self._road_wheel_angle(inputs), ax, ay])
         speeds = [inputs.values.get(name, 0.0) for name in WHEEL_SPEEDS]
         fx = longitudinal_forces(torques(inputs), self.wheel_acceleration.update(t, speeds),
                                  self.vehicle.wheel_inertia, self.vehicle.wheel_radius)
-        return np.array([self._road_wheel_angle(inputs), *loads, *fx])
+        return np.array([self._road_wheel_angle(inputs), ax, ay, *fx])
 
     def _update(self, channels, inputs: TickInputs, u: np.ndarray, lateral_ok: bool, t: float) -> bool:
         """Non-DICI filters use the first IMU; ``dici-gfckf`` gives local filter j the rows of IMU j."""

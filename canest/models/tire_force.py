@@ -7,8 +7,9 @@ the linear tire of eq 10. Lateral forces are in each wheel's own frame, N,
 positive to the left (ISO 8855).
 
 Input ``u = (delta, ax, ay, Fx_fl, Fx_fr, Fx_rl, Fx_rr)``: road wheel angle,
-the measured accelerations (for the loads of eq 7 only; the estimator passes
-ay through the body's roll lag, :mod:`canest.estimation.roll_lag`) and the longitudinal
+the measured accelerations (for the loads of eq 7, and at low speed for the
+forces' sum ``m ay``; the estimator passes ay through the body's roll lag,
+:mod:`canest.estimation.roll_lag`) and the longitudinal
 tire forces from the in-wheel motors (eq 4, :mod:`canest.models.wheel_force`).
 :class:`AxDrivenTireForceModel` is the same model for cars without motor
 torques: ``u = (delta, ax, ay)`` and the longitudinal forces follow from ax
