@@ -1,6 +1,7 @@
 """Tire forces and friction end to end: log -> estimator -> CSV columns and CAN frames, against the truth."""
 import csv
 import dataclasses
+from types import SimpleNamespace
 
 import can
 import cantools
@@ -10,7 +11,9 @@ import pytest
 from canest.apps.compare import with_filter
 from canest.apps.evaluate import read_table
 from canest.models import two_track
-from canest.estimation.roll_lag import ROLL_LAG, RollLag
+from canest.estimation.inputs import TickInputs
+from canest.estimation.roll_lag import ROLL_LAG, LoadAccelerations
+from canest.estimation.validity import FirstOrderLag
 from canest.pipeline import Pipeline
 from canest.apps.replay import replay
 from canest.signals import WHEELS
@@ -192,7 +195,7 @@ def test_the_roll_lag_passes_the_first_sample_and_shakes_less_than_the_accelerom
     """ay as the wheel loads take it: the first sample as it is, a step followed at ``alpha = dt / (ROLL_LAG + dt)``
     per tick, white noise at the tick's rate left at ``sqrt(alpha / (2 - alpha))`` of its std."""
     dt = 0.01
-    lag = RollLag(dt)
+    lag = FirstOrderLag(dt, ROLL_LAG)
     assert lag.update(2.0) == 2.0
     steps = [lag.update(3.0) for _ in range(int(round(ROLL_LAG / dt)))]
     alpha = dt / (ROLL_LAG + dt)
@@ -201,3 +204,18 @@ def test_the_roll_lag_passes_the_first_sample_and_shakes_less_than_the_accelerom
     noise = np.random.default_rng(0).normal(0.0, 1.4, 20000)
     lagged = np.array([lag.update(value) for value in noise])
     assert np.std(lagged[100:]) == pytest.approx(1.4 * np.sqrt(alpha / (2.0 - alpha)), rel=0.05)
+
+
+def tick(ax: float, ay: float, ay_stale: bool = False) -> TickInputs:
+    sample = SimpleNamespace(t=0.0, names=("ax", "ay"), values=(ax, ay), stale=(False, ay_stale), fresh=(True, True),
+                             ages=(0.0, 0.0), saturated=(False, False))
+    return TickInputs(sample)
+
+
+def test_the_loads_take_ax_as_held_and_restart_ay_s_lag_after_a_stale_sample():
+    loads = LoadAccelerations(0.01)
+    alpha = 0.01 / (ROLL_LAG + 0.01)
+    assert loads.update(tick(1.0, 2.0)) == (1.0, 2.0)
+    assert loads.update(tick(-1.0, 3.0)) == pytest.approx((-1.0, 2.0 + alpha))
+    assert loads.update(tick(-1.0, 3.0, ay_stale=True)) == (-1.0, 0.0)
+    assert loads.update(tick(0.5, 4.0)) == (0.5, 4.0)  # the next good sample starts the lag anew

@@ -1,4 +1,4 @@
-"""The lateral acceleration the wheel loads follow: the measured ay through the body's roll lag.
+"""The accelerations the wheel loads follow: ax as measured, ay through the body's roll lag.
 
 The loads of eq 7 (DICI-GFCKF; :meth:`canest.models.wheels.WheelGeometry.loads`)
 move left and right with the body's roll, which a vibrating accelerometer's
@@ -15,25 +15,31 @@ the rear right rose by as much, 4 std off. A first-order lag::
 simulator's suspension lags its load transfer by 0.08 s,
 ``canest.sim.plant.LOAD_TRANSFER_TAU``; a passenger car's roll mode answers
 in about that time). A stale ay, or one at its DBC limit, passes as it is
-and the next good sample starts the lag anew. Only ay is lagged: ax also drives the longitudinal forces
-and vx, and the front-rear split it moves is seen by the yaw moment.
+and the next good sample starts the lag anew. Only ay is lagged: ax also
+drives the longitudinal forces and vx, and the front-rear split it moves is
+seen by the yaw moment.
 """
 from __future__ import annotations
+
+from canest.estimation.inputs import TickInputs
+from canest.estimation.validity import FirstOrderLag
 
 ROLL_LAG = 0.05  # s: below the simulator's 0.08, README "How far to trust the output" measured 0.05 and 0.1
 
 
-class RollLag:
-    """ay as the wheel loads take it: :data:`ROLL_LAG` behind the measured, starting at the first sample (after a
-    :meth:`reset`: the estimator's, or a stale ay)."""
+class LoadAccelerations:
+    """(ax, ay) as the wheel loads take them: ax as held (0 where stale), ay :data:`ROLL_LAG` behind the measured,
+    starting at the first sample (after a :meth:`reset`: the estimator's, or a stale ay)."""
 
     def __init__(self, dt: float):
-        self.alpha = dt / (ROLL_LAG + dt)
-        self.ay = None
+        self.ay = FirstOrderLag(dt, ROLL_LAG)
 
     def reset(self) -> None:
-        self.ay = None
+        self.ay.reset()
 
-    def update(self, ay: float) -> float:
-        self.ay = ay if self.ay is None else self.ay + self.alpha * (ay - self.ay)
-        return self.ay
+    def update(self, inputs: TickInputs) -> tuple[float, float]:
+        ax, ay = inputs.current("ax"), inputs.current("ay")
+        if not inputs.has("ay"):
+            self.ay.reset()  # stale (0) or at its DBC limit: as it is; the next good sample starts anew
+            return ax, ay
+        return ax, self.ay.update(ay)

@@ -21,7 +21,7 @@ from canest.estimation import validity
 from canest.estimation.core import Estimator
 from canest.estimation.inputs import WHEEL_SPEEDS, TickInputs
 from canest.estimation.reference_speed import TORQUES
-from canest.estimation.roll_lag import RollLag
+from canest.estimation.roll_lag import LoadAccelerations
 from canest.models import tire_force
 from canest.models.tire import relaxation_rate
 from canest.models.tire_force import AxDrivenTireForceModel, TireForceModel
@@ -53,12 +53,12 @@ class TireForceEstimator(Estimator):
         self.sensor_sets = np.array(self.model.sensor_sets)
         self.force_inputs = TORQUES if self.torques else ("ax",)  # what the longitudinal forces come from
         self.wheel_acceleration = WheelAcceleration()
-        self.roll_lag = RollLag(self.dt)
+        self.load_accelerations = LoadAccelerations(self.dt)
 
     def reset(self) -> None:
         super().reset()
         self.wheel_acceleration.reset()
-        self.roll_lag.reset()
+        self.load_accelerations.reset()
 
     def _initial_state(self, inputs: TickInputs) -> np.ndarray:
         """As the single track, and each lateral force at its load share of ``m ay``."""
@@ -91,11 +91,7 @@ class TireForceEstimator(Estimator):
     def _control(self, inputs: TickInputs, t: float) -> np.ndarray:
         """u = (delta, ax, ay, Fx per wheel from eq 4); without motor torques (delta, ax, ay); ay as the loads
         take it, through the body's roll lag (:mod:`canest.estimation.roll_lag`)."""
-        ax, ay = accelerations(inputs)
-        if inputs.has("ay"):
-            ay = self.roll_lag.update(ay)
-        else:
-            self.roll_lag.reset()  # stale (0) or at its DBC limit: as it is; the next good sample starts anew
+        ax, ay = self.load_accelerations.update(inputs)
         if not self.torques:
             return np.array([self._road_wheel_angle(inputs), ax, ay])
         speeds = [inputs.values.get(name, 0.0) for name in WHEEL_SPEEDS]

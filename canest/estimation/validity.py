@@ -139,7 +139,7 @@ import numpy as np
 from canest.estimation.estimate import CAUSE_GROUPS as GROUPS, CAUSES
 
 __all__ = ["CAUSES", "GROUPS", "Consistency", "Holds", "KinematicCheck", "LateralDrift", "LinearRegime", "inflation",
-           "judge", "innovation_terms", "sideslip_model_std", "FadingMaximum"]
+           "judge", "innovation_terms", "sideslip_model_std", "FadingMaximum", "FirstOrderLag"]
 
 WINDOW = 50  # channel samples
 MIN_SAMPLES = 10  # before this many samples a channel's mean is not judged
@@ -234,17 +234,32 @@ class LinearRegime:
     def __init__(self, vehicle, dt: float):
         self.wheelbase = vehicle.wheelbase
         self.understeer = vehicle.understeer_gradient
-        self.blend = dt / (REGIME_LAG + dt)
-        self.reference = None
+        self.reference = FirstOrderLag(dt, REGIME_LAG)
 
     def reset(self) -> None:
-        self.reference = None
+        self.reference.reset()
 
     def inside(self, delta: float, vx: float, yaw_rate: float) -> bool:
         steady = vx * delta / max(self.wheelbase + self.understeer * vx * vx, 0.1 * self.wheelbase)
-        self.reference = steady if self.reference is None else self.reference + self.blend * (steady - self.reference)
+        reference = self.reference.update(steady)
         absolute, relative = REGIME_TOLERANCE
-        return abs(yaw_rate - self.reference) <= absolute + relative * abs(self.reference)
+        return abs(yaw_rate - reference) <= absolute + relative * abs(reference)
+
+
+class FirstOrderLag:
+    """``x[k] = x[k-1] + alpha (u[k] - x[k-1])``, ``alpha = dt / (time_constant + dt)`` (the backward-Euler step
+    of ``time_constant dx/dt = u - x``), starting at the first sample after construction or :meth:`reset`."""
+
+    def __init__(self, dt: float, time_constant: float):
+        self.alpha = dt / (time_constant + dt)
+        self.value = None
+
+    def reset(self) -> None:
+        self.value = None
+
+    def update(self, sample: float) -> float:
+        self.value = sample if self.value is None else self.value + self.alpha * (sample - self.value)
+        return self.value
 
 
 class FadingMaximum:
