@@ -39,8 +39,9 @@ CALIBRATION_UNITS = {"speed": ("x", 1.0), "gyro_bias": ("deg/s", DEG), "ay_bias"
 
 
 def calibration_state(page: dict) -> str:
-    """``converged`` (its posterior std below its threshold; the published std of the stiffnesses, the steering ratio and
-    the understeer gradient also holds the linear tires' model error), ``learning`` (driving excited it) or ``prior`` (not yet)."""
+    """``converged`` (its posterior std below its threshold; the published std of the stiffnesses, the steering
+    ratio and the understeer gradient also holds the linear tires' model error), ``learning`` (driving excited it)
+    or ``prior`` (not yet)."""
     return "converged" if page["CalConverged"] else "learning" if page["CalLearned"] else "prior"
 
 

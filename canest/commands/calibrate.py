@@ -26,9 +26,10 @@ least squares): each axle's cornering stiffness, the steering ratio and the
 steering angle sensor's offset, the gyro and lateral accelerometer biases, the
 effective wheel radius, and each log's road bank. Each value is printed with
 its 95 % confidence interval; the stiffnesses' also hold the linear tires' own
-error (5 %, 1 std), the steering ratio's 2 %, which no amount of driving averages away. A constant bank cannot be told from an ay bias:
-the logs' mean bank is taken as 0 (drive a road both ways, or flat roads; one
-log: its bank is 0). Best data: a few minutes of country road at 50-100 km/h,
+error (5 %, 1 std), the steering ratio's 2 %, which no amount of driving
+averages away. A constant bank cannot be told from an ay bias: the logs' mean
+bank is taken as 0 (drive a road both ways, or flat roads; one log: its bank
+is 0). Best data: a few minutes of country road at 50-100 km/h,
 bends of both directions, straights, braking and accelerating, below 4 m/s^2
 of lateral acceleration. --out writes the config with the calibrated values,
 each commented (never over an existing file); `canest check --config` loads it."""

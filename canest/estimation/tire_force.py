@@ -101,7 +101,7 @@ class TireForceEstimator(Estimator):
 
     def _update(self, channels, inputs: TickInputs, u: np.ndarray, lateral_ok: bool, t: float) -> bool:
         """Non-DICI filters use the first IMU; ``dici-gfckf`` gives local filter j the rows of IMU j."""
-        if not hasattr(self.filter, "sensor_sets"):
+        if "sensor_sets" not in self.filter.needs:
             return self._apply(channels, u, t, mask=self.sensor_sets <= 1)
         local_masks = [channels.mask & ((self.sensor_sets == 0) | (self.sensor_sets == j + 1))
                        for j in range(self.filter.sensor_sets)]

@@ -95,7 +95,7 @@ def bench_canest(name, model, us, x0, P0, Q, R, z, rows):
     measurement = Measurement(lambda X, u: model.measure(X, u)[:, rows], getattr(model, "measure_jacobian", None),
                               tuple(range(z.size)), getattr(model, "measure_parameter_jacobian", None))
     filt = make_filter(name, x0, P0, model)
-    if hasattr(filt, "sensor_sets") and isinstance(model, TireForceModel):  # one IMU per local filter
+    if "sensor_sets" in filt.needs and isinstance(model, TireForceModel):  # one IMU per local filter
         imu_2 = Measurement(lambda X, u: model.measure(X, u)[:, [4, 5, 6, 3]])
         sets = [(z, measurement, R), (z, imu_2, R * 2.0)]
 
