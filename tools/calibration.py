@@ -167,8 +167,8 @@ def online(config, duration: float, bank_deg: float, workdir: Path, attitude=(0.
               + error)
     print("* converged (posterior std below its threshold after 30 s of excitation; the stiffnesses', the "
           "understeer's and the ratio's published std also hold the linear tires' model error); "
-          "corrections are applied, rate-limited, from 10 s of excitation, the gyro bias from its convergence, the steering and lateral offsets never "
-          "(a bank)")
+          "corrections are applied, rate-limited, from 10 s of excitation, the gyro bias from its convergence, "
+          "the steering and lateral offsets never (a bank)")
     print(f"cost: {1e6 * np.mean(seconds[1:]):.1f} us per tick on average, {1e6 * np.percentile(seconds[1:], 99):.1f} "
           f"us at the 99th percentile, CPU time of this thread ({len(seconds) - 1} ticks)")
     print(f"\nRMSE after 60 s {'':<14}" + " ".join(f"{s:>9}" for s in STATES) + "   (deg, deg/s, m/s)")
