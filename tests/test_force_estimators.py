@@ -191,9 +191,9 @@ def test_the_tire_curves_error_moves_both_wheels_of_an_axle_together(config):
     np.testing.assert_allclose(front[0, 0] / (1 - decay**2), (e * forces[0]) ** 2, rtol=1e-9)
 
 
-def test_the_roll_lag_passes_the_first_sample_and_shakes_less_than_the_accelerometer():
-    """ay as the wheel loads take it: the first sample as it is, a step followed at ``alpha = dt / (ROLL_LAG + dt)``
-    per tick, white noise at the tick's rate left at ``sqrt(alpha / (2 - alpha))`` of its std."""
+def test_a_first_order_lag_passes_the_first_sample_and_shakes_less_than_its_input():
+    """The first sample as it is, a step followed at ``alpha = dt / (time_constant + dt)`` per tick, white noise at
+    the tick's rate left at ``sqrt(alpha / (2 - alpha))`` of its std (the roll lag's time constant here)."""
     dt = 0.01
     lag = FirstOrderLag(dt, ROLL_LAG)
     assert lag.update(2.0) == 2.0
@@ -206,16 +206,21 @@ def test_the_roll_lag_passes_the_first_sample_and_shakes_less_than_the_accelerom
     assert np.std(lagged[100:]) == pytest.approx(1.4 * np.sqrt(alpha / (2.0 - alpha)), rel=0.05)
 
 
-def tick(ax: float, ay: float, ay_stale: bool = False) -> TickInputs:
-    sample = SimpleNamespace(t=0.0, names=("ax", "ay"), values=(ax, ay), stale=(False, ay_stale), fresh=(True, True),
-                             ages=(0.0, 0.0), saturated=(False, False))
+def tick(ax: float, ay: float, stale=(False, False), saturated=(False, False)) -> TickInputs:
+    sample = SimpleNamespace(t=0.0, names=("ax", "ay"), values=(ax, ay), stale=stale, fresh=(True, True),
+                             ages=(0.0, 0.0), saturated=saturated)
     return TickInputs(sample)
 
 
-def test_the_loads_take_ax_as_held_and_restart_ay_s_lag_after_a_stale_sample():
+def test_the_loads_take_ax_as_held_and_restart_ay_s_lag_after_no_measurement():
+    """No measurement (stale, or at its DBC limit) is 0, and an ay's restarts the lag at the next good sample."""
     loads = LoadAccelerations(0.01)
     alpha = 0.01 / (ROLL_LAG + 0.01)
     assert loads.update(tick(1.0, 2.0)) == (1.0, 2.0)
     assert loads.update(tick(-1.0, 3.0)) == pytest.approx((-1.0, 2.0 + alpha))
-    assert loads.update(tick(-1.0, 3.0, ay_stale=True)) == (-1.0, 0.0)
-    assert loads.update(tick(0.5, 4.0)) == (0.5, 4.0)  # the next good sample starts the lag anew
+    assert loads.update(tick(-1.0, 3.0, stale=(False, True))) == (-1.0, 0.0)
+    assert loads.update(tick(0.5, 4.0)) == (0.5, 4.0)
+    assert loads.update(tick(0.5, 5.0)) == pytest.approx((0.5, 4.0 + alpha))
+    assert loads.update(tick(0.5, 19.6, saturated=(False, True))) == (0.5, 0.0)
+    assert loads.update(tick(0.5, 3.0)) == (0.5, 3.0)
+    assert loads.update(tick(7.0, 3.0, stale=(True, False)))[0] == 0.0

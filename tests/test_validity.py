@@ -217,6 +217,22 @@ def test_linear_regime_sees_an_understeering_car(config):
     assert not saturated[-1]
 
 
+def test_linear_regime_follows_the_steering_through_the_yaw_response_lag(config):
+    """The reference lags a steering step by ``REGIME_LAG`` (first order): a yaw rate still at the old steady state
+    is inside at the step and outside once the reference has moved on."""
+    dt, delta, vx = 0.01, 0.04, 20.0
+    regime = validity.LinearRegime(config.vehicle, dt)
+    before = vx * delta / (config.vehicle.wheelbase + regime.understeer * vx**2)
+    assert all(regime.inside(delta, vx, before) for _ in range(100))
+    after = [regime.inside(2.0 * delta, vx, before) for _ in range(int(round(5 * validity.REGIME_LAG / dt)))]
+    assert after[0] and not after[-1]
+    first_out = after.index(False)
+    alpha = dt / (validity.REGIME_LAG + dt)
+    absolute, relative = validity.REGIME_TOLERANCE
+    reference = [2.0 * before - before * (1.0 - alpha) ** (k + 1) for k in range(len(after))]
+    assert first_out == next(k for k, r in enumerate(reference) if abs(before - r) > absolute + relative * abs(r))
+
+
 def test_the_cause_message_carries_every_cause_the_dbc_documents():
     db = cantools.database.load_file(str(OUTPUT_DBC))
     message = db.get_message_by_name("CE_ValidityCause")

@@ -14,8 +14,9 @@ the rear right rose by as much, 4 std off. A first-order lag::
 (an e-folding time of ``-dt / ln(1 - alpha)``, 0.055 s at 100 Hz; the
 simulator's suspension lags its load transfer by 0.08 s,
 ``canest.sim.plant.LOAD_TRANSFER_TAU``; a passenger car's roll mode answers
-in about that time). A stale ay, or one at its DBC limit, passes as it is
-and the next good sample starts the lag anew. Only ay is lagged: ax also
+in about that time). A stale ay, or one at its DBC limit, passes as 0 (the
+held inputs' value for no measurement) and the next good sample starts the
+lag anew. Only ay is lagged: ax also
 drives the longitudinal forces and vx, and the front-rear split it moves is
 seen by the yaw moment.
 """
@@ -28,7 +29,8 @@ ROLL_LAG = 0.05  # s: below the simulator's 0.08, README "How far to trust the o
 
 
 class LoadAccelerations:
-    """(ax, ay) as the wheel loads take them: ax as held (0 where stale), ay :data:`ROLL_LAG` behind the measured,
+    """(ax, ay) as the wheel loads take them: ax as held (0 where stale or at its DBC
+    limit), ay :data:`ROLL_LAG` behind the measured,
     starting at the first sample (after a :meth:`reset`: the estimator's, or a stale ay)."""
 
     def __init__(self, dt: float):
@@ -40,6 +42,6 @@ class LoadAccelerations:
     def update(self, inputs: TickInputs) -> tuple[float, float]:
         ax, ay = inputs.current("ax"), inputs.current("ay")
         if not inputs.has("ay"):
-            self.ay.reset()  # stale (0) or at its DBC limit: as it is; the next good sample starts anew
+            self.ay.reset()  # stale or at its DBC limit (0): the next good sample starts anew
             return ax, ay
         return ax, self.ay.update(ay)
