@@ -16,9 +16,8 @@ simulator's suspension lags its load transfer by 0.08 s,
 ``canest.sim.plant.LOAD_TRANSFER_TAU``; a passenger car's roll mode answers
 in about that time). A stale ay, or one at its DBC limit, passes as 0 (the
 held inputs' value for no measurement) and the next good sample starts the
-lag anew. Only ay is lagged: ax also
-drives the longitudinal forces and vx, and the front-rear split it moves is
-seen by the yaw moment.
+lag anew. Only ay is lagged: ax also drives the longitudinal forces and vx,
+and the front-rear split it moves is seen by the yaw moment.
 """
 from __future__ import annotations
 
@@ -28,20 +27,25 @@ from canest.estimation.validity import FirstOrderLag
 ROLL_LAG = 0.05  # s: below the simulator's 0.08, README "How far to trust the output" measured 0.05 and 0.1
 
 
+def accelerations(inputs: TickInputs) -> tuple[float, float]:
+    """(ax, ay) as held, 0 where stale or at its DBC limit (the two-track model's loads take them so: the roll lag
+    was measured there and not kept, README "How far to trust the output")."""
+    return inputs.current("ax"), inputs.current("ay")
+
+
 class LoadAccelerations:
-    """(ax, ay) as the wheel loads take them: ax as held (0 where stale or at its DBC
-    limit), ay :data:`ROLL_LAG` behind the measured,
-    starting at the first sample (after a :meth:`reset`: the estimator's, or a stale ay)."""
+    """(ax, ay) as the wheel loads take them: ax as held (:func:`accelerations`), ay :data:`ROLL_LAG` behind the
+    measured, starting at the first sample (after a :meth:`reset`: the estimator's, or a stale ay)."""
 
     def __init__(self, dt: float):
-        self.ay = FirstOrderLag(dt, ROLL_LAG)
+        self.ay_lag = FirstOrderLag(dt, ROLL_LAG)
 
     def reset(self) -> None:
-        self.ay.reset()
+        self.ay_lag.reset()
 
     def update(self, inputs: TickInputs) -> tuple[float, float]:
-        ax, ay = inputs.current("ax"), inputs.current("ay")
+        ax, ay = accelerations(inputs)
         if not inputs.has("ay"):
-            self.ay.reset()  # stale or at its DBC limit (0): the next good sample starts anew
+            self.ay_lag.reset()  # stale or at its DBC limit (0): the next good sample starts anew
             return ax, ay
-        return ax, self.ay.update(ay)
+        return ax, self.ay_lag.update(ay)

@@ -21,7 +21,7 @@ from canest.estimation import validity
 from canest.estimation.core import Estimator
 from canest.estimation.inputs import WHEEL_SPEEDS, TickInputs
 from canest.estimation.reference_speed import TORQUES
-from canest.estimation.roll_lag import LoadAccelerations
+from canest.estimation.roll_lag import LoadAccelerations, accelerations
 from canest.models import tire_force
 from canest.models.tire import relaxation_rate
 from canest.models.tire_force import AxDrivenTireForceModel, TireForceModel
@@ -35,11 +35,6 @@ LATERAL_FORCES = tuple(f"fy_{w}" for w in WHEELS)
 def torques(inputs: TickInputs) -> np.ndarray:
     """The four motor torques as held (0 where not mapped)."""
     return np.array([inputs.values.get(name, 0.0) for name in TORQUES])
-
-
-def accelerations(inputs: TickInputs) -> tuple[float, float]:
-    """(ax, ay) as held, 0 where stale."""
-    return inputs.current("ax"), inputs.current("ay")
 
 
 class TireForceEstimator(Estimator):

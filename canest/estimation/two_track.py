@@ -70,7 +70,8 @@ import numpy as np
 from canest.estimation import validity
 from canest.estimation.core import Estimator
 from canest.estimation.inputs import WHEEL_SPEEDS, TickInputs
-from canest.estimation.tire_force import TORQUES, accelerations, torques
+from canest.estimation.roll_lag import accelerations
+from canest.estimation.tire_force import TORQUES, torques
 from canest.models import two_track
 from canest.models.two_track import TwoTrackModel
 from canest.models.wheel_force import WheelAcceleration
