@@ -13,7 +13,7 @@ from canest.apps.evaluate import read_table
 from canest.models import two_track
 from canest.estimation.inputs import TickInputs
 from canest.estimation.roll_lag import ROLL_LAG, LoadAccelerations
-from canest.estimation.validity import FirstOrderLag
+from canest.estimation.lags import FirstOrderLag
 from canest.pipeline import Pipeline
 from canest.apps.replay import replay
 from canest.signals import WHEELS

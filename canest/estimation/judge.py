@@ -15,6 +15,7 @@ import numpy as np
 from canest.estimation import channels as ch
 from canest.estimation import validity
 from canest.estimation.inputs import WHEEL_SPEEDS
+from canest.estimation.lags import FadingMaximum
 
 # the input behind each derived channel (a channel not listed is fed by the input of its own name)
 SOURCES = {"vx_wheel": WHEEL_SPEEDS, "vx_reference": WHEEL_SPEEDS, "yaw_acceleration": ("yaw_rate",)}
@@ -35,9 +36,9 @@ class StateJudge:
         self.kinematic = validity.KinematicCheck(dt)
         self.lateral_drift = validity.LateralDrift(dt)
         self.sideslip_known = False  # the sideslip was valid on the last tick
-        self.reference_gap = validity.FadingMaximum(dt, validity.HOLD)  # m/s, vx's from the reference (:meth:`widen`)
+        self.reference_gap = FadingMaximum(dt, validity.HOLD)  # m/s, vx's from the reference (:meth:`widen`)
         # |v r| (m/s^2), or a tire curve's rear slip angle (rad), held (:meth:`sideslip_model_std`)
-        self.excitation = validity.FadingMaximum(dt, validity.MODEL_ERROR_MEMORY)
+        self.excitation = FadingMaximum(dt, validity.MODEL_ERROR_MEMORY)
         self.kinematic_offsets = (0.0, 0.0)  # ay, yaw rate (:meth:`use_kinematic_offsets`)
         # speed scale, gyro bias: the config's claim until the online calibration applies its own
         # (:meth:`use_correction_std`)

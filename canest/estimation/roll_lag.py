@@ -22,7 +22,7 @@ and the front-rear split it moves is seen by the yaw moment.
 from __future__ import annotations
 
 from canest.estimation.inputs import TickInputs
-from canest.estimation.validity import FirstOrderLag
+from canest.estimation.lags import FirstOrderLag
 
 ROLL_LAG = 0.05  # s: below the simulator's 0.08, README "How far to trust the output" measured 0.05 and 0.1
 

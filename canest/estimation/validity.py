@@ -137,9 +137,10 @@ import numpy as np
 
 
 from canest.estimation.estimate import CAUSE_GROUPS as GROUPS, CAUSES
+from canest.estimation.lags import FirstOrderLag
 
 __all__ = ["CAUSES", "GROUPS", "Consistency", "Holds", "KinematicCheck", "LateralDrift", "LinearRegime", "inflation",
-           "judge", "innovation_terms", "sideslip_model_std", "FadingMaximum", "FirstOrderLag"]
+           "judge", "innovation_terms", "sideslip_model_std"]
 
 WINDOW = 50  # channel samples
 MIN_SAMPLES = 10  # before this many samples a channel's mean is not judged
@@ -244,37 +245,6 @@ class LinearRegime:
         reference = self.reference.update(steady)
         absolute, relative = REGIME_TOLERANCE
         return abs(yaw_rate - reference) <= absolute + relative * abs(reference)
-
-
-class FirstOrderLag:
-    """``x[k] = x[k-1] + alpha (u[k] - x[k-1])``, ``alpha = dt / (time_constant + dt)`` (the backward-Euler step
-    of ``time_constant dx/dt = u - x``), starting at the first sample after construction or :meth:`reset`."""
-
-    def __init__(self, dt: float, time_constant: float):
-        self.alpha = dt / (time_constant + dt)
-        self.value = None
-
-    def reset(self) -> None:
-        self.value = None
-
-    def update(self, sample: float) -> float:
-        self.value = sample if self.value is None else self.value + self.alpha * (sample - self.value)
-        return self.value
-
-
-class FadingMaximum:
-    """The largest value seen, fading with time constant ``memory`` s (a leaky maximum)."""
-
-    def __init__(self, dt: float, memory: float):
-        self.decay = math.exp(-dt / memory)
-        self.value = 0.0
-
-    def reset(self) -> None:
-        self.value = 0.0
-
-    def update(self, value: float) -> float:
-        self.value = max(value, self.value * self.decay)
-        return self.value
 
 
 class Holds:
