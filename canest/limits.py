@@ -89,6 +89,7 @@ ESTIMATOR = {
     "friction_excitation": Range(1.0, 1e6, "N"),
     "friction_correlation": Range(0.0, 1.0, high_open=True),
     "gyro_bias_std": Range(0.0, 0.1, "rad/s"),  # 0.1 rad/s: 5.7 deg/s, no working yaw-rate sensor's bias
+    "lateral_model_error": Range(0.0, 1.0),  # m/s^2 per m/s^2 of |ay|; 1: the model's ay no better than zero
 }
 
 NOISE = Range(1e-9, 1e6)  # process noise, measurement noise and initial standard deviations, in their SI units

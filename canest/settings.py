@@ -117,6 +117,9 @@ class EstimatorConfig:
     # rad/s, 1 std: the gyro's bias beyond what measurement_noise.yaw_rate admits (noise the filter averages, not an
     # offset every tick shares); the published yaw rate carries it until the online calibration applies its own
     gyro_bias_std: float = 0.0
+    # m/s^2 of the ay channels' noise per m/s^2 of |ay|, in quadrature with measurement_noise.ay and ay_2 (the
+    # sensors'): the model's lateral error, which grows with ay (the tires' degressive stiffness, body roll)
+    lateral_model_error: float = 0.05
     latency_compensation: bool = False
     online_calibration: bool = True  # learn sensor biases and parameters while driving (estimation.online_calibration)
     state_file: str | None = None  # where the online calibration is saved and reloaded from; None: not saved

@@ -111,6 +111,17 @@ def test_wheel_radius_and_gyro_bias_claims_are_read_within_their_ranges(tmp_path
     assert re.search(r":\d+: estimator\.gyro_bias_std: ", error_of(path))
 
 
+def test_the_lateral_model_error_is_read_within_its_range(tmp_path):
+    """ay's model error per m/s^2 of ay (README "How far to trust the output"): 0.05 unless given, 0 to 1."""
+    assert load_config(CONFIG).estimator.lateral_model_error == 0.05
+    path = write_variant(tmp_path, lambda d: d["estimator"].pop("lateral_model_error"))
+    assert load_config(path).estimator.lateral_model_error == 0.05
+    path = write_variant(tmp_path, lambda d: d["estimator"].update(lateral_model_error=0.0))
+    assert load_config(path).estimator.lateral_model_error == 0.0
+    path = write_variant(tmp_path, lambda d: d["estimator"].update(lateral_model_error=1.5))
+    assert re.search(r":\d+: estimator\.lateral_model_error: .*0 to 1", error_of(path))
+
+
 def test_typo_in_a_key(tmp_path):
     path = write_variant(tmp_path, lambda d: d["estimator"].update(rate_hzz=50))
     assert "estimator.rate_hzz: unknown key" in error_of(path)

@@ -61,6 +61,7 @@ from canest.settings import Config
 
 GYROS = ("yaw_rate", "yaw_rate_2")  # measurement channels read straight from a gyro
 ACCELEROMETERS = ("ax", "ay", "ax_2", "ay_2")  # measurement channels read straight from an accelerometer
+LATERAL_ACCELEROMETERS = ("ay", "ay_2")  # their R carries the model's lateral error (estimator.lateral_model_error)
 
 log = logging.getLogger("canest.estimator")
 
@@ -133,6 +134,7 @@ class Estimator:
         self.ay_row = model.measurement_names.index("ay") if "ay" in model.measurement_names else None
         self.input_noise = {name: MeasuredNoise() for name in model.measurement_names
                             if name in ACCELEROMETERS + GYROS}
+        self.lateral_rows = [row for row, name in enumerate(model.measurement_names) if name in LATERAL_ACCELEROMETERS]
         self.accelerometer_rows = [(row, self.input_noise[name]) for row, name in enumerate(model.measurement_names)
                                    if name in ACCELEROMETERS]
         self.integrates_ax = getattr(model, "vx_noise_key", "vx") == "vx_from_ax"
@@ -285,7 +287,8 @@ class Estimator:
         for row, (name, hold) in self.gyro_holds.items():  # a fresh gyro sample at the tick, not as held
             if inputs.has(name) and inputs.any_fresh(name):
                 derived.setdefault(name, (hold.at(t, inputs.values[name], inputs.ages[name]), self.r_std[row], 0.0))
-        return ch.assemble(self.model.measurement_names, self.r_std, inputs, derived, lateral_ok)
+        channels = ch.assemble(self.model.measurement_names, self.r_std, inputs, derived, lateral_ok)
+        return ch.with_lateral_model_error(channels, self.lateral_rows, self.est.lateral_model_error)
 
     def _apply(self, channels: ch.Channels, u: np.ndarray, t: float, mask=None) -> bool:
         """One measurement update with the usable channels (within ``mask``); True if the filter has diverged."""
@@ -378,13 +381,15 @@ class Estimator:
                   if inputs.has(name) and self.input_noise[name].std is not None]
         return max(ratios, default=1.0)
 
-    def _ay_density(self) -> float:
+    def _ay_density(self, inputs: TickInputs) -> float:
         """ay's noise density as its samples show it over :data:`INTEGRATED_NOISE_SPAN`, where its noise is above the
-        configured (0 until then, and for a quiet ay: the kinematic check's tolerance is set for it, and spans of
-        0.1 s read part of a quiet drive's own ay as noise; taken, they let dici-gfckf's sideslip on a drawn car
-        be valid but wrong on 0.3 % of its ticks)."""
+        configured at this ay (with the model's error, :func:`canest.estimation.channels.lateral_std`; 0 until
+        then, and for a quiet ay: the kinematic check's tolerance is set for it, and spans of 0.1 s read part of a
+        quiet drive's own ay as noise; taken, they let dici-gfckf's sideslip on a drawn car be valid but wrong on
+        0.3 % of its ticks)."""
         noise = self.input_noise.get("ay")
-        loud = noise is not None and noise.std is not None and noise.std > self.r_std[self.ay_row]
+        loud = noise is not None and noise.std is not None and noise.std > ch.lateral_std(
+            self.r_std[self.ay_row], self.est.lateral_model_error, inputs.values["ay"])
         return (self.ay_noise.density or 0.0) if loud else 0.0
 
     def _publish(self, t, mode, missing, inputs: TickInputs, lateral_ok: bool = False) -> Estimate:
@@ -427,7 +432,7 @@ class Estimator:
         }
         lateral = {"low_speed": mode == "low_speed", "after_reset": mode == "degraded" and t < self.suspect_until,
                    "zero_learned": self.steering_zero.learned, "lateral_ok": lateral_ok, "beta": beta, "vx": vx,
-                   "delta": self._road_wheel_angle(inputs), "ay_density": self._ay_density(),
+                   "delta": self._road_wheel_angle(inputs), "ay_density": self._ay_density(inputs),
                    "at_limit_of_unbounded_friction": self._at_limit_of_unbounded_friction()}
         walk_unknown = self.ax_noise.density is None and reference.last_t == t
         causes = self.judge.causes(inputs, ratios, std[self.vx], lateral, t, drift, walk_unknown)
