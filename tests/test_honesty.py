@@ -139,7 +139,7 @@ def test_vx_is_never_more_certain_than_its_disagreement_with_the_reference_speed
     published std is never below the disagreement with the reference beyond the reference's own std: vx turns
     "uncertain". Left are ticks where the reference, off the same way, still agreed: over eight seeds 50 of 2 192
     valid ticks, at most 4.5 std (with ay's std 0.15 on every tick, before ``lateral_model_error``: 56 of 2 098,
-    4.55; seed 2 alone 3 and 17 of them, seeds 5 and 7 25-27 either way: one seed tells nothing of this)."""
+    4.55; seed 2 3 -> 17 of them, seed 5 25 -> 6, seed 7 27 either way: one seed tells little of this)."""
     from canest.apps.compare import with_filter
     from canest.apps.evaluate import read_table
     from canest.apps.replay import replay

@@ -56,7 +56,8 @@ def median_runs(config, folder, names, case, seeds, outliers=0.0):
 def with_r_scale(config, factor):
     est = config.estimator
     noise = {k: v * np.sqrt(factor) for k, v in est.measurement_noise.items()}
-    return dataclasses.replace(config, estimator=dataclasses.replace(est, measurement_noise=noise))
+    return dataclasses.replace(config, estimator=dataclasses.replace(
+        est, measurement_noise=noise, lateral_model_error=min(1.0, est.lateral_model_error * np.sqrt(factor))))
 
 
 def main():

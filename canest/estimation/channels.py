@@ -39,18 +39,20 @@ class Channels:
     ages: np.ndarray
 
 
-def with_lateral_model_error(channels: Channels, rows, share: float) -> Channels:
-    """The channels with each lateral accelerometer row's (``rows``) std ``hypot(std, share |z|)``: the model's
-    error in ay grows with ay, where the sensor's noise does not."""
+def with_lateral_model_error(channels: Channels, rows: list, share: float) -> Channels:
+    """The channels with each lateral accelerometer row's (``rows``) std ``hypot(std, share |z|)`` (``share``: the
+    config's ``estimator.lateral_model_error``): the model's error in ay grows with ay, the sensor's noise does
+    not."""
     std = channels.std.copy()
     for row in rows:
         std[row] = lateral_std(std[row], share, channels.z[row])
     return Channels(channels.mask, channels.z, std, channels.ages)
 
 
-def lateral_std(sensor_std: float, share: float, ay: float) -> float:
-    """A lateral accelerometer channel's std at ``ay``: the sensor's and the model's ``share |ay|`` in quadrature."""
-    return math.hypot(sensor_std, share * ay)
+def lateral_std(sensor_std: float, share: float, z: float) -> float:
+    """A lateral accelerometer channel's std at its sample ``z``: the sensor's and the model's ``share |z|`` in
+    quadrature."""
+    return math.hypot(sensor_std, share * z)
 
 
 def assemble(names, nominal_std: np.ndarray, inputs, derived: dict, lateral_ok: bool) -> Channels:

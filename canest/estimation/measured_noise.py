@@ -1,7 +1,7 @@
 """A sensor's noise as its samples show it: what a filter must take for an IMU that vibrates.
 
 The configured noise of an IMU channel is its datasheet's (the built-in
-config: gyro 0.002 rad/s, ay 0.15 m/s^2 with the lateral model's error). An
+config: gyro 0.002 rad/s, ay 0.11 m/s^2 with a road's crown; the model's error beside it grows with ay). An
 IMU on a real body also vibrates: the simulator's ``vibration 1``, as the
 issue's real car, moves ay by 1.4 m/s^2 and the gyro by 0.3 deg/s,
 correlated over 15 ms. Taken at the configured noise, on the honesty grid

@@ -41,7 +41,7 @@ bound friction from below only.
 A noisy IMU: that one-sided rule turns an accelerometer's noise into a
 falling friction (every update that lowers it is taken, every one that
 raises it below the limit refused). On a vibrating IMU (ay shaken by 1.4
-m/s^2 where 0.15 is configured) jckf's frictions on a dry road fell to
+m/s^2 where 0.15 was configured) jckf's frictions on a dry road fell to
 0.15-0.2 and, judged by the accelerometers' measured noise as the other
 states are, were valid but wrong on 3-7 % of their valid ticks. So friction
 is judged under the configured noise: an IMU that vibrates beyond it makes

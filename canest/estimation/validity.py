@@ -10,7 +10,7 @@ is normalized by what the sensor's noise and the prior spread explain:
 ``R_c`` is the configured noise, or an accelerometer's noise as its own
 samples show it where that is larger (:mod:`canest.estimation.measured_noise`:
 the scatter of the signal, no model, no innovation; the R every filter takes
-for it). A vibrating body shakes ay by 1.4 m/s^2 where 0.15 is configured:
+for it). A vibrating body shakes ay by 1.4 m/s^2 where 0.11 is configured:
 judged by the configured noise the sideslip was never valid on such an IMU
 (issue 17's real car's ay jumped so). Friction alone keeps the configured noise (its
 one-sided gate turns a noisy IMU into a falling estimate:
