@@ -96,30 +96,23 @@ def test_cornering_stiffness_uncertainty_is_read_within_its_range_and_defaults_t
     assert re.search(r":\d+: vehicle\.cornering_stiffness_uncertainty: .*0 to 1", error_of(path))
 
 
-def test_wheel_radius_and_gyro_bias_claims_are_read_within_their_ranges(tmp_path):
-    """What the config says it knows of the rolling radius and the gyro's bias (README "How far to trust the
-    output"): the built-in simulated car's radius is exact; a car that says nothing gets a tire size's 2 %."""
-    config = load_config(CONFIG)
-    assert config.vehicle.wheel_radius_uncertainty == 0.0 and config.estimator.gyro_bias_std == 0.0
-    path = write_variant(tmp_path, lambda d: d["vehicle"].pop("wheel_radius_uncertainty"))
-    assert load_config(path).vehicle.wheel_radius_uncertainty == 0.02
-    path = write_variant(tmp_path, lambda d: d["estimator"].update(gyro_bias_std=0.01))
-    assert load_config(path).estimator.gyro_bias_std == 0.01
-    path = write_variant(tmp_path, lambda d: d["vehicle"].update(wheel_radius_uncertainty=0.5))
-    assert re.search(r":\d+: vehicle\.wheel_radius_uncertainty: .*0 to 0\.2", error_of(path))
-    path = write_variant(tmp_path, lambda d: d["estimator"].update(gyro_bias_std=-0.01))
-    assert re.search(r":\d+: estimator\.gyro_bias_std: ", error_of(path))
-
-
-def test_the_lateral_model_error_is_read_within_its_range(tmp_path):
-    """ay's model error per m/s^2 of ay (README "How far to trust the output"): 0.05 unless given, 0 to 1."""
-    assert load_config(CONFIG).estimator.lateral_model_error == 0.05
-    path = write_variant(tmp_path, lambda d: d["estimator"].pop("lateral_model_error"))
-    assert load_config(path).estimator.lateral_model_error == 0.05
-    path = write_variant(tmp_path, lambda d: d["estimator"].update(lateral_model_error=0.0))
-    assert load_config(path).estimator.lateral_model_error == 0.0
-    path = write_variant(tmp_path, lambda d: d["estimator"].update(lateral_model_error=1.5))
-    assert re.search(r":\d+: estimator\.lateral_model_error: .*0 to 1", error_of(path))
+@pytest.mark.parametrize("section, key, built_in, unless_given, given, beyond, allowed", [
+    ("vehicle", "wheel_radius_uncertainty", 0.0, 0.02, 0.01, 0.5, "0 to 0.2"),
+    ("estimator", "gyro_bias_std", 0.0, 0.0, 0.01, -0.01, "0 to 0.1 rad/s"),
+    ("estimator", "lateral_model_error", 0.05, 0.05, 0.0, 1.5, "0 to 1"),
+])
+def test_what_a_config_claims_of_its_errors_is_read_within_its_range(tmp_path, section, key, built_in, unless_given,
+                                                                     given, beyond, allowed):
+    """What the config says it knows of the rolling radius and the gyro's bias, and ay's model error per m/s^2 of
+    ay (README "How far to trust the output"): the built-in simulated car's radius is exact; a car that says
+    nothing of its radius gets a tire size's 2 %."""
+    assert getattr(getattr(load_config(CONFIG), section), key) == built_in
+    path = write_variant(tmp_path, lambda d: d[section].pop(key, None))
+    assert getattr(getattr(load_config(path), section), key) == unless_given
+    path = write_variant(tmp_path, lambda d: d[section].update({key: given}))
+    assert getattr(getattr(load_config(path), section), key) == given
+    path = write_variant(tmp_path, lambda d: d[section].update({key: beyond}))
+    assert re.search(rf":\d+: {section}\.{key}: .*{re.escape(allowed)}", error_of(path))
 
 
 def test_typo_in_a_key(tmp_path):
