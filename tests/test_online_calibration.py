@@ -309,7 +309,8 @@ def test_the_kinematic_checks_take_out_the_learned_lateral_offset(config):
     bias applied alone left ``c / v`` in the kinematic sideslip rate, and the published sideslip std (never below
     the kinematic mismatch) was 1.3 deg after 50 s against an error of 0.07; with the learned offsets, three of
     the mismatch's 2 s memories after c's convergence (it fades from 2.8 deg, built up in a bend of 2.9 m/s^2
-    before), the model's: 0.05, and 0.11 in the bends that follow."""
+    before), the model's: 0.05, and 0.11 in the bends that follow; with the part of c beyond ay's configured noise
+    (0.2 against 0.11) through the tires (``validity.sideslip_offset_std``, 0.07 deg) 0.11, and 0.26."""
     drive = simulate(config, "country", 80.0, 0.85, duration=75.0, seed=3, mismatch=WRONG)
     pipeline = Pipeline(config)
     calibration = pipeline.calibration
@@ -326,7 +327,7 @@ def test_the_kinematic_checks_take_out_the_learned_lateral_offset(config):
     std = np.array([e.values["beta_std"] for e in late])
     error = np.array([e.values["beta"] for e in late]) - np.interp([e.t for e in late], drive.truth["t"],
                                                                      drive.truth["beta"])
-    assert np.degrees(np.median(std)) < 0.1 and np.degrees(std.max()) < 0.3  # 0.23 in a bend of 3.3 m/s^2
+    assert np.degrees(np.median(std)) < 0.15 and np.degrees(std.max()) < 0.35  # 0.25 in a bend of 3.3 m/s^2
     assert np.mean(np.abs(error) < 2.0 * std) > 0.9
 
 

@@ -295,3 +295,18 @@ def test_vx_std_is_never_below_its_remembered_distance_from_the_reference_speed(
     assert judge.widen(std, index, ratios, 0.0)[1] == pytest.approx(0.6 * math.exp(-0.01 / validity.HOLD))
     judge.reset()
     assert judge.widen(std, index, ratios, 0.0)[1] == pytest.approx(0.05)
+
+
+def test_the_sideslip_std_carries_the_learned_ay_offset_beyond_what_ay_s_noise_admits(config):
+    """An ay offset the online calibration learned and does not apply (a bias or a bank) moves the sideslip by up
+    to ``m c / (C_f + C_r)``; the part within ay's configured noise is the noise's already."""
+    vehicle = config.vehicle
+    judge = StateJudge(SingleTrackModel(vehicle), vehicle, 0.01, ay_noise=0.11)
+    assert judge.sideslip_model_std(0.0) == 0.0  # straight, nothing learned
+    judge.use_kinematic_offsets(0.08, 0.0)
+    assert judge.sideslip_model_std(0.0) == 0.0  # within the noise
+    judge.use_kinematic_offsets(-0.31, 0.0)  # a bank of 3 deg less a bias of 0.2
+    per_side_force = vehicle.mass / (vehicle.cornering_stiffness_front + vehicle.cornering_stiffness_rear)
+    assert judge.sideslip_model_std(0.0) == pytest.approx(0.2 * per_side_force)
+    assert judge.sideslip_model_std(3.0) == pytest.approx(math.hypot(
+        0.2 * per_side_force, validity.sideslip_model_std(vehicle, 3.0)))

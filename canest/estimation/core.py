@@ -119,7 +119,8 @@ class Estimator:
                                 getattr(model, "transition_low_speed_jacobian", None)),
         }
         self.latency_compensation = self.est.latency_compensation
-        self.judge = StateJudge(model, config.vehicle, self.dt, self.est.gyro_bias_std)
+        self.judge = StateJudge(model, config.vehicle, self.dt, self.est.gyro_bias_std,
+                                self.est.measurement_noise["ay"])
         self.stale_before = self.stale_now = frozenset()  # inputs stale on the previous and on this tick
         self.geometry = WheelGeometry(config.vehicle)
         self.layout = DriveLayout(config.vehicle)  # which wheels ax drives or brakes, for a car without torques
