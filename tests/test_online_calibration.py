@@ -309,8 +309,8 @@ def test_the_kinematic_checks_take_out_the_learned_lateral_offset(config):
     bias applied alone left ``c / v`` in the kinematic sideslip rate, and the published sideslip std (never below
     the kinematic mismatch) was 1.3 deg after 50 s against an error of 0.07; with the learned offsets, three of
     the mismatch's 2 s memories after c's convergence (it fades from 2.8 deg, built up in a bend of 2.9 m/s^2
-    before), the model's: 0.05, and 0.11 in the bends that follow; with the part of c beyond ay's configured noise
-    (0.2 against 0.11) through the tires (``validity.sideslip_offset_std``, 0.07 deg) 0.11, and 0.26."""
+    before), the model's: 0.05, and 0.11 in the bends that follow; with the part of c (-0.31 on this banked road)
+    beyond ay's configured noise through the tires (``validity.sideslip_offset_std``) 0.11, and 0.26."""
     drive = simulate(config, "country", 80.0, 0.85, duration=75.0, seed=3, mismatch=WRONG)
     pipeline = Pipeline(config)
     calibration = pipeline.calibration

@@ -302,11 +302,31 @@ def test_the_sideslip_std_carries_the_learned_ay_offset_beyond_what_ay_s_noise_a
     to ``m c / (C_f + C_r)``; the part within ay's configured noise is the noise's already."""
     vehicle = config.vehicle
     judge = StateJudge(SingleTrackModel(vehicle), vehicle, 0.01, ay_noise=0.11)
-    assert judge.sideslip_model_std(0.0) == 0.0  # straight, nothing learned
+    assert judge.sideslip_offset_std() == 0.0  # nothing learned
     judge.use_kinematic_offsets(0.08, 0.0)
-    assert judge.sideslip_model_std(0.0) == 0.0  # within the noise
+    assert judge.sideslip_offset_std() == 0.0  # within the noise
     judge.use_kinematic_offsets(-0.31, 0.0)  # a bank of 3 deg less a bias of 0.2
     per_side_force = vehicle.mass / (vehicle.cornering_stiffness_front + vehicle.cornering_stiffness_rear)
-    assert judge.sideslip_model_std(0.0) == pytest.approx(0.2 * per_side_force)
-    assert judge.sideslip_model_std(3.0) == pytest.approx(math.hypot(
-        0.2 * per_side_force, validity.sideslip_model_std(vehicle, 3.0)))
+    assert judge.sideslip_offset_std() == pytest.approx(0.2 * per_side_force)
+
+
+@pytest.mark.parametrize("filter_name", ["ckf", "dici-gfckf"])
+def test_every_model_publishes_the_learned_ay_offset_in_its_sideslip_std(config, filter_name):
+    """The tire-force model's Q holds its tires' error (its std does not add it again), not a learned ay offset:
+    every model's published sideslip std is at least the offset's term, from ay's configured noise."""
+    import dataclasses
+
+    from canest.pipeline import Pipeline
+    from canest.sim.simulate import simulate
+
+    est = dataclasses.replace(config.estimator, filter=filter_name, online_calibration=False,
+                              model="tire_force" if filter_name == "dici-gfckf" else "single_track")
+    pipeline = Pipeline(dataclasses.replace(config, estimator=est))
+    estimator = pipeline.estimator
+    assert estimator.judge.ay_noise == config.estimator.measurement_noise["ay"]
+    estimator.judge.use_kinematic_offsets(-1.0, 0.0)  # a large offset, as if learned (the learner is off)
+    sim = simulate(config, "step", 80.0, 0.85, duration=2.0, seed=1)
+    stds = [e.values["beta_std"] for frame in sim.frames for e in pipeline.feed(frame)
+            if math.isfinite(e.values["beta_std"])]
+    floor = estimator.judge.sideslip_offset_std()
+    assert floor > 0.002 and len(stds) > 100 and min(stds) >= floor * (1 - 1e-12)

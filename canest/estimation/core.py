@@ -415,7 +415,8 @@ class Estimator:
         reference = self.reference_speed  # vx is measured unless the reference integrated ax this tick
         std = np.sqrt(np.maximum(np.diag(self.filter.covariance), 0.0))
         rear_slip = None if self.judge.linear_tires else self._rear_slip(x)  # linear tires: the ay term
-        beta_model_std = self.judge.sideslip_model_std(vx * x[self.yaw], rear_slip)
+        offset_std = self.judge.sideslip_offset_std()  # a learned ay offset not applied: no model's Q holds it
+        beta_model_std = math.hypot(self.judge.sideslip_model_std(vx * x[self.yaw], rear_slip), offset_std)
         drift = self.judge.drift(inputs, vx, beta, math.hypot(std[self.beta], beta_model_std),
                                  reference.last_t != t or reference.anchored_at == t)
         carried = self.covariance_has_tire_error and not self.low_speed  # the model's Q has the tire error
@@ -423,7 +424,7 @@ class Estimator:
         # r vy alike), and their difference tells nothing
         lateral_std = self.judge.lateral_std(drift)
         gap = 0.0 if self.integrates_ax else reference.disagreement(t, vx, lateral_std)
-        std = self.judge.widen(std, index, ratios, 0.0 if carried else beta_model_std, lateral_std,
+        std = self.judge.widen(std, index, ratios, offset_std if carried else beta_model_std, lateral_std,
                                self._gyro_noise(inputs), reference.integration_std(t),
                                self.integrates_ax and reference.wheels_t == t, gap, vx)
         values = {

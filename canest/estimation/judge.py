@@ -105,15 +105,17 @@ class StateJudge:
         ``validity.MODEL_ERROR_MEMORY`` s (:func:`validity.sideslip_model_std`). Held because the filter's
         sideslip error lags the excitation: on a vibrating IMU, whose kinematic check cannot catch it, ckf's
         sideslip was 1.3 deg off with a std of 0.4 after the peak of the sine on 0.85 (5.4 m/s^2 on its way down
-        from 6.5), the term following ay down. In quadrature with :func:`validity.sideslip_offset_std` of the ay
-        offset the online calibration learned and does not apply (:meth:`use_kinematic_offsets`), beyond what
-        ay's configured noise admits."""
+        from 6.5), the term following ay down."""
         if rear_slip is None:
-            model = validity.sideslip_model_std(self.vehicle, self.excitation.update(abs(steady_ay)))
-        else:
-            model = validity.sideslip_model_std(self.vehicle, steady_ay, self.excitation.update(abs(rear_slip)))
+            return validity.sideslip_model_std(self.vehicle, self.excitation.update(abs(steady_ay)))
+        return validity.sideslip_model_std(self.vehicle, steady_ay, self.excitation.update(abs(rear_slip)))
+
+    def sideslip_offset_std(self) -> float:
+        """The sideslip error (rad) of the ay offset the online calibration learned and does not apply
+        (:meth:`use_kinematic_offsets`) beyond what ay's configured noise admits (:func:`validity.sideslip_offset_std`):
+        a side force no model's process noise holds, so every model's published std takes it."""
         unadmitted = max(0.0, abs(self.kinematic_offsets[0]) - self.ay_noise)
-        return math.hypot(model, validity.sideslip_offset_std(self.vehicle, unadmitted))
+        return validity.sideslip_offset_std(self.vehicle, unadmitted)
 
     def drift(self, inputs, vx: float, beta: float, beta_std: float, vx_measured: bool) -> float:
         """This tick's bound on vx's drift from an unmodelled lateral velocity (0 without ay or a gyro);

@@ -233,10 +233,10 @@ def sideslip_offset_std(vehicle, ay_offset: float) -> float:
     """The sideslip error (rad) an offset in ay the model does not take can cause: ``m |c| / (C_f + C_r)``, the
     steady single track's sideslip for a side force ``m c`` its tires carry. The online calibration learns the
     offset ``c`` but never applies it: a bias and a road's bank (``-g sin(bank)``, a side force the model's
-    dynamics lack) look the same. An upper bound (the gyro holds part of it: on the flat road of README "Online
-    calibration", c = 0.2 m/s^2, the sideslip was 0.07 deg off, the bound 0.16). The judge takes it for the part of
-    ``c`` beyond ay's configured noise: on a road banked 3 deg (c = -0.31) the sideslip was within 2 std on 92 % of
-    its valid ticks, NEES 2.1, with the configured 0.11 m/s^2 (a crown's bias, not a bank's) alone."""
+    dynamics lack) look the same. An upper bound (the gyro holds part of it). The judge takes it for the part of
+    ``c`` beyond ay's configured noise: on a road banked 3 deg with an ay bias of 0.2 (c = -0.31 m/s^2) the
+    sideslip was within 2 std on 92 % of its valid ticks, NEES 2.06, with the configured 0.11 m/s^2 (a crown's
+    bias, not a bank's) alone; 100 %, 0.43 with it."""
     return vehicle.mass * abs(ay_offset) / (vehicle.cornering_stiffness_front + vehicle.cornering_stiffness_rear)
 
 
