@@ -26,7 +26,7 @@ MEASURED_DIRECTLY = ("yaw_rate", "vx")
 class StateJudge:
     def __init__(self, model, vehicle, dt: float, gyro_bias_std: float = 0.0, ay_noise: float = 0.0):
         self.model = model
-        self.ay_noise = ay_noise  # m/s^2, the configured: the ay offset it admits (:meth:`sideslip_model_std`)
+        self.ay_noise = ay_noise  # m/s^2, the configured: the ay offset it admits (:meth:`sideslip_offset_std`)
         self.vehicle = vehicle
         self.consistency = validity.Consistency(model.measurement_names)
         self.friction_consistency = validity.Consistency(model.measurement_names)  # under the configured noise
