@@ -56,7 +56,7 @@ class Pipeline:
         """One tick's estimate, carrying the online calibration's report when the learner runs."""
         sample = self.calibration.correct(self.leveling.level(self.resampler.sample(tick)))
         if self.calibration.enabled:
-            self.estimator.use_stiffness(*self.calibration.stiffness)
+            self.estimator.use_stiffness(*self.calibration.stiffness, self.calibration.stiffness_error)
             self.estimator.use_kinematic_offsets(*self.calibration.kinematic_offsets)
             self.estimator.use_correction_std(*self.calibration.correction_std)
         estimate = self.estimator.step(sample)

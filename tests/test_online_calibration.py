@@ -230,6 +230,8 @@ def test_before_the_corrections_are_applied_vx_and_the_yaw_rate_carry_the_config
         pipeline = Pipeline(run_config)
         runs[name] = [e for frame in flat.frames for e in pipeline.feed(frame)]
         assert pipeline.calibration.correction_std == (None, None)  # nothing applied yet: the claim is published
+        assert pipeline.calibration.stiffness_error is None
+        assert pipeline.estimator.vehicle.cornering_stiffness_uncertainty == config.vehicle.cornering_stiffness_uncertainty
         pipeline.close()
 
     def within_two_std(estimates, state):
@@ -390,7 +392,15 @@ def test_the_stiffnesses_are_learned_from_a_window_of_the_drive_and_reach_the_mo
     assert first - history[0][0] >= WINDOW + LATENCY - 1.0  # a window of usable driving, then the latency
     assert calibration.applied[front] < 1.0 < calibration.applied[rear]
     vehicle = pipeline.estimator.vehicle
-    assert pipeline.estimator.stiffness == calibration.stiffness
+    assert pipeline.estimator.stiffness == (*calibration.stiffness, calibration.stiffness_error)
+    # the learned stiffnesses' error takes the config's claim's place in the model error of the published stds:
+    # the larger axle's published std, and what the rate-limited factor has still to follow, relative
+    report = calibration.report()
+    assert calibration.stiffness_error == pytest.approx(max(
+        math.hypot(report[f"calib_{axle}_std"], report[f"calib_{axle}"] - calibration.applied[NAMES.index(axle)])
+        / calibration.applied[NAMES.index(axle)] for axle in ("front", "rear")))
+    assert STIFFNESS_MODEL_ERROR <= calibration.stiffness_error < config.vehicle.cornering_stiffness_uncertainty
+    assert vehicle.cornering_stiffness_uncertainty == calibration.stiffness_error
     assert vehicle.cornering_stiffness_front == pytest.approx(
         config.vehicle.cornering_stiffness_front * calibration.applied[front])
     assert vehicle.cornering_stiffness_rear == pytest.approx(

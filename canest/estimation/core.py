@@ -140,17 +140,22 @@ class Estimator:
                                    if name in ACCELEROMETERS]
         self.integrates_ax = getattr(model, "vx_noise_key", "vx") == "vx_from_ax"
         self.steering_zero = steering_zero(config)
-        self.stiffness = (1.0, 1.0)  # factors on the configured cornering stiffnesses (:meth:`use_stiffness`)
+        # factors on the configured cornering stiffnesses and their error (:meth:`use_stiffness`)
+        self.stiffness = (1.0, 1.0, None)
 
-    def use_stiffness(self, front: float, rear: float) -> None:
+    def use_stiffness(self, front: float, rear: float, error: float | None = None) -> None:
         """Run the model and judge the sideslip with the configured cornering stiffnesses times ``front`` and
-        ``rear`` (the online calibration's applied factors); the filter's state is kept."""
-        if (front, rear) == self.stiffness:
+        ``rear`` (the online calibration's applied factors), uncertain by ``error`` (relative; ``None``: the
+        config's ``cornering_stiffness_uncertainty``, :attr:`OnlineCalibration.stiffness_error`); the filter's
+        state is kept."""
+        if (front, rear, error) == self.stiffness:
             return
-        self.stiffness = (front, rear)
+        self.stiffness = (front, rear, error)
         p = self.config.vehicle
         self.vehicle = replace(p, cornering_stiffness_front=front * p.cornering_stiffness_front,
-                               cornering_stiffness_rear=rear * p.cornering_stiffness_rear)
+                               cornering_stiffness_rear=rear * p.cornering_stiffness_rear,
+                               cornering_stiffness_uncertainty=p.cornering_stiffness_uncertainty if error is None
+                               else error)
         self.model.use_vehicle(self.vehicle)
         self.judge.use_vehicle(self.vehicle)
         self.steering_zero.use_vehicle(self.vehicle)
