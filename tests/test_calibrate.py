@@ -18,7 +18,6 @@ import pytest
 
 from canest.models.output_error import calibrate
 from canest.apps.calibrated_config import write_calibrated
-from canest.calibration import STIFFNESS_MODEL_ERROR
 from canest.apps.drive_signals import read_drive
 from canest.config import load_config
 from canest.sim.mismatch import PlantMismatch, true_fit, true_vehicle
@@ -101,26 +100,19 @@ def test_calibrated_config_loads_with_check_and_says_what_it_changed(calibrated)
     result = canest("check", "--config", out)
     assert result.returncode == 0, result.stderr
     text = out.read_text()
-    # four vehicle values, the stiffnesses' and the radius's uncertainty, three sensor offsets
-    assert text.count("  # calibrated") == 9
-    vehicle = load_config(out).vehicle
-    assert 0.0 < vehicle.wheel_radius_uncertainty < 0.005  # the fit's 0.1 % and the drift between drives (claimed 0)
-    claimed = load_config(CONFIG).vehicle.cornering_stiffness_uncertainty
-    assert STIFFNESS_MODEL_ERROR <= vehicle.cornering_stiffness_uncertainty < claimed  # the fit's std, its floor
+    assert text.count("  # calibrated") == 8  # four vehicle values, the radius's uncertainty, three sensor offsets
+    radius = load_config(out).vehicle.wheel_radius_uncertainty  # the fit's 0.1 % and the drift between drives
+    assert 0.0 < radius < 0.005  # written: the config claimed 0
     assert "road bank of" in text and "(not a config value)" in text
 
 
-def _scores(config, log, truth, folder, name):
-    """``canest evaluate``'s scores of a replay of ``log`` with ``config``, per state."""
+def _rmse(config, log, truth, folder, name):
     estimates = folder / f"{name}.csv"
     result = canest("replay", log, "--config", config, "--csv", estimates)
     assert result.returncode == 0, result.stderr
     result = canest("evaluate", estimates, truth, "--json")
     assert result.returncode == 0, result.stderr
-    return json.loads(result.stdout)
-
-
-def _rmse(scores):
+    scores = json.loads(result.stdout)
     return {state: scores[state]["rmse"] for state in ("beta", "yaw_rate", "vx")}
 
 
@@ -131,10 +123,9 @@ def test_replay_with_the_calibrated_config_is_as_good_as_with_the_true_one(drive
     true_config = folder / "true.yaml"
     write_calibrated(config, fit, true_config, ["the true parameters of the simulated car"])
     log, truth_csv = runs[2]  # the flat road: sideslip valid on most ticks
-    with_true = _rmse(_scores(true_config, log, truth_csv, folder, "true"))
-    calibrated_scores = _scores(calibrated[0], log, truth_csv, folder, "calibrated")
-    with_calibrated = _rmse(calibrated_scores)
-    with_wrong = _rmse(_scores(CONFIG, log, truth_csv, folder, "wrong"))
+    with_true = _rmse(true_config, log, truth_csv, folder, "true")
+    with_calibrated = _rmse(calibrated[0], log, truth_csv, folder, "calibrated")
+    with_wrong = _rmse(CONFIG, log, truth_csv, folder, "wrong")
     for state in with_true:
         print(f"{state} RMSE: true config {with_true[state]:.4f}, calibrated {with_calibrated[state]:.4f}, "
               f"wrong {with_wrong[state]:.4f}")
@@ -145,11 +136,6 @@ def test_replay_with_the_calibrated_config_is_as_good_as_with_the_true_one(drive
     # 0.2-0.4 % (the issue's bound is 10 %) while 15 % of the true config's RMSE (0.02 m/s) would need 0.05 %;
     # what is asserted is that the calibration removes most of the wrong radius's error (README "Calibration")
     assert with_calibrated["vx"] < 0.3 * with_wrong["vx"]
-    # the calibrated config claims less of the stiffnesses (the fit's std, not the textbook claim): its sideslip
-    # std still covers the error (issue 15's band on the honest side)
-    beta = calibrated_scores["beta"]
-    print(f"calibrated sideslip: within 2 std {beta['cov2']:.3f}, NEES {beta['nees']:.2f}")
-    assert beta["cov2"] >= 0.9 and beta["nees"] <= 2.0
 
 
 def test_errors_name_the_file_and_exit_by_kind(drives, tmp_path):

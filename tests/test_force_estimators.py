@@ -145,16 +145,15 @@ def test_the_frictions_model_error_weighs_each_ticks_ratio_by_its_information():
     and says friction exactly; evidence from a tire nearer its linear range carries the stiffness's error."""
     from canest.estimation.two_track import EVIDENCE_MEMORY, FrictionModelError
 
-    error = FrictionModelError(dt=0.01)
-    assert error.std(0.2) == 0.0  # no evidence yet: nothing to add
+    error = FrictionModelError(uncertainty=0.2, dt=0.01)
+    assert error.std == 0.0  # no evidence yet: nothing to add
     error.add(np.full(4, 4000.0), np.zeros(4))  # saturated tires
-    assert error.std(0.2) == 0.0
+    assert error.std == 0.0
     error.add(np.full(4, 1000.0), np.full(4, 3000.0))  # a tire leaving saturation: ratio 3, a quarter of the weight
     decay = np.exp(-0.01 / EVIDENCE_MEMORY)
     expected = 0.2 * (1000.0 * 3000.0) / (decay * 4000.0**2 + 1000.0**2)
-    assert error.std(0.2) == pytest.approx(expected)
-    assert 0.0 < error.std(0.2) < 0.2 * 3.0
-    assert error.std(0.05) == pytest.approx(expected / 4.0)  # a learned stiffness's smaller error, in proportion
+    assert error.std == pytest.approx(expected)
+    assert 0.0 < error.std < 0.2 * 3.0
 
 
 def test_a_tires_stiffness_sensitivity_is_its_force_in_the_linear_range_and_zero_at_the_peak(config):

@@ -3,10 +3,7 @@
 canest has no overlay mechanism (a config is one file, :func:`canest.config.load_config`),
 so ``canest calibrate --out`` writes a copy of the config with the calibrated
 values and a comment on each saying what it was and how sure the fit is:
-the axle cornering stiffnesses and the steering ratio in ``vehicle``, with how well the stiffnesses are now
-known (``cornering_stiffness_uncertainty``, the larger axle's relative std, never below
-:data:`canest.calibration.STIFFNESS_MODEL_ERROR`: the sideslip's, the forces' and the frictions' published
-std carry it, where 0.3 stands for textbook values), the
+the axle cornering stiffnesses and the steering ratio in ``vehicle``, the
 effective wheel radius in ``vehicle.wheel_radius`` (and, for wheel speeds the
 DBC gives as a linear speed, in their ``scale``: the radius does not reach
 those) with how well it is now known (``wheel_radius_uncertainty``,
@@ -25,7 +22,7 @@ from pathlib import Path
 
 import yaml
 
-from canest.calibration import CONFIDENCE, RADIUS_DRIFT, STIFFNESS_MODEL_ERROR, STIFFNESSES, Fit
+from canest.calibration import CONFIDENCE, RADIUS_DRIFT, Fit
 from canest.apps.init import write_new
 from canest.codec.dbc import load_database
 from canest.config import BUILTIN_PREFIX, load_config
@@ -51,11 +48,6 @@ def calibrated_values(config: Config, fit: Fit) -> dict:
         ("vehicle", "cornering_stiffness_rear"): scaled("rear", v.cornering_stiffness_rear),
         ("vehicle", "steering_ratio"): scaled("ratio", v.steering_ratio),
         ("vehicle", "wheel_radius"): scaled("speed", v.wheel_radius),
-        ("vehicle", "cornering_stiffness_uncertainty"): (
-            round(max(STIFFNESS_MODEL_ERROR, *(fit.half_width(a) / CONFIDENCE / fit.value(a) for a in STIFFNESSES)),
-                  4),
-            f"calibrated: was {v.cornering_stiffness_uncertainty:g}; the larger axle's std, the linear tires' "
-            f"model error ({STIFFNESS_MODEL_ERROR:g}) at least"),
         ("vehicle", "wheel_radius_uncertainty"): (
             round(math.hypot(fit.half_width("speed") / CONFIDENCE / fit.value("speed"), RADIUS_DRIFT), 4),
             f"calibrated: was {v.wheel_radius_uncertainty:g}; the fit's std and {RADIUS_DRIFT:g} of drift "

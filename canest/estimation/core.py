@@ -145,17 +145,23 @@ class Estimator:
 
     def use_stiffness(self, front: float, rear: float, error: float | None = None) -> None:
         """Run the model and judge the sideslip with the configured cornering stiffnesses times ``front`` and
-        ``rear`` (the online calibration's applied factors), uncertain by ``error`` (relative; ``None``: the
-        config's ``cornering_stiffness_uncertainty``, :attr:`OnlineCalibration.stiffness_error`); the filter's
-        state is kept."""
+        ``rear`` (the online calibration's applied factors); the filter's state is kept.
+
+        ``error`` (relative, :attr:`OnlineCalibration.stiffness_error`; ``None``: nothing learned) takes the place
+        of the config's ``cornering_stiffness_uncertainty`` for a model with linear tires, whose term it is: the
+        linear stiffness's error, beside the degressive term (:func:`validity.sideslip_model_std`). A model with
+        a tire curve keeps the claim: there the same number also stands for the curve's shape, the longitudinal
+        slip stiffness and the nominal friction (the forces' process noise, the frictions' stiffness term), none
+        of which the learner measures, and on a vibrating IMU 0.05 left jckf's sideslip and dici-gfckf's forces
+        valid but wrong (README "How far to trust the output")."""
         if (front, rear, error) == self.stiffness:
             return
         self.stiffness = (front, rear, error)
         p = self.config.vehicle
+        learned = error is not None and getattr(self.model, "linear_tires", False)
         self.vehicle = replace(p, cornering_stiffness_front=front * p.cornering_stiffness_front,
                                cornering_stiffness_rear=rear * p.cornering_stiffness_rear,
-                               cornering_stiffness_uncertainty=p.cornering_stiffness_uncertainty if error is None
-                               else error)
+                               cornering_stiffness_uncertainty=error if learned else p.cornering_stiffness_uncertainty)
         self.model.use_vehicle(self.vehicle)
         self.judge.use_vehicle(self.vehicle)
         self.steering_zero.use_vehicle(self.vehicle)

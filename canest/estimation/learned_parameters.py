@@ -27,10 +27,13 @@ class Learned:
 
 
 def parameters(vehicle: VehicleParams, gyro_bias_std: float = 0.0) -> tuple:
-    """The learned parameters; the understeer gradient starts at the config's; the speed scale's and the gyro
-    bias's prior never narrower than what the config claims of them (``vehicle.wheel_radius_uncertainty``,
-    ``estimator.gyro_bias_std``, rad/s), whose place their learned std takes once applied."""
+    """The learned parameters; the understeer gradient starts at the config's; the speed scale's, the gyro
+    bias's and the cornering stiffnesses' prior never narrower than what the config claims of them
+    (``vehicle.wheel_radius_uncertainty``, ``estimator.gyro_bias_std``, rad/s,
+    ``vehicle.cornering_stiffness_uncertainty``), whose place their learned error takes once applied (the
+    stiffnesses': for linear tires, ``Estimator.use_stiffness``)."""
     deg = math.radians(1.0)
+    stiffness_std = max(0.3, vehicle.cornering_stiffness_uncertainty)
     return (
         Learned("speed", 1.0, max(0.03, vehicle.wheel_radius_uncertainty), *BOUNDS["speed"], 0.001, 0.005, 0.01),
         Learned("gyro_bias", 0.0, max(0.5 * deg, gyro_bias_std), *BOUNDS["gyro_bias"], 0.01 * deg, 0.15 * deg,
@@ -40,8 +43,8 @@ def parameters(vehicle: VehicleParams, gyro_bias_std: float = 0.0) -> tuple:
         Learned("ratio", 1.0, 0.1, *BOUNDS["ratio"], 0.002, 0.03, 0.025),
         Learned("understeer", vehicle.understeer_gradient, 0.003, -0.01, 0.02, 0.0001, 0.0005, 0.0),
         Learned("ax_bias", 0.0, 0.3, -2.0, 2.0, 0.01, 0.03, 0.1),
-        Learned("front", 1.0, 0.3, 0.5, 2.0, 0.02, 0.05, 0.05),
-        Learned("rear", 1.0, 0.3, 0.5, 2.0, 0.02, 0.05, 0.05),
+        Learned("front", 1.0, stiffness_std, 0.5, 2.0, 0.02, 0.05, 0.05),
+        Learned("rear", 1.0, stiffness_std, 0.5, 2.0, 0.02, 0.05, 0.05),
     )
 
 

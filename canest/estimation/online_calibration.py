@@ -498,15 +498,15 @@ class OnlineCalibration:
         window fits' evidence and the linear tires' model error, :data:`canest.calibration.STIFFNESS_MODEL_ERROR`)
         and the distance the rate-limited applied factor has still to follow, in quadrature, over the applied
         factor. ``None`` until a stiffness is first applied: the config's ``cornering_stiffness_uncertainty``
-        holds until then. It takes that claim's place in the sideslip's, the forces' and the frictions' model
-        error (``Estimator.use_stiffness``), as :attr:`correction_std` takes the wheel radius's and the gyro
-        bias's: a claim of 0.3 for textbook values, kept after the stiffnesses are learned, leaves the published
-        sideslip std wider than the model's error (README "How far to trust the output")."""
+        holds until then. It takes that claim's place in the sideslip's model error of a model with linear tires
+        (``Estimator.use_stiffness``), as :attr:`correction_std` takes the wheel radius's and the gyro bias's: a
+        claim of 0.3 for textbook values, kept after the stiffnesses are learned, leaves the published sideslip
+        std wider than the model's error (README "Online calibration")."""
         if not self.correcting[list(STIFFNESS)].any():
             return None
         report = self.report()  # built once per block
-        return max(math.hypot(report[f"calib_{NAMES[i]}_std"], report[f"calib_{NAMES[i]}"] - self.applied[i])
-                   / self.applied[i] for i in STIFFNESS)
+        return float(max(math.hypot(report[f"calib_{NAMES[i]}_std"], report[f"calib_{NAMES[i]}"] - self.applied[i])
+                         / self.applied[i] for i in STIFFNESS))
 
     def report(self) -> MappingProxyType:
         """Per parameter: ``calib_<name>`` (the learned value), ``_std``, ``_applied``, ``_learned`` (driving excited

@@ -97,7 +97,8 @@ class FrictionModelError:
     range ``S_mu`` is, and the ratio says friction was not measured.
     """
 
-    def __init__(self, dt: float):
+    def __init__(self, uncertainty: float, dt: float):
+        self.uncertainty = uncertainty
         self.decay = math.exp(-dt / EVIDENCE_MEMORY)
         self.information = self.cross = 0.0
 
@@ -106,10 +107,9 @@ class FrictionModelError:
         self.information = self.decay * self.information + float(np.sum(friction_sensitivity**2))
         self.cross = self.decay * self.cross + float(np.sum(friction_sensitivity * stiffness_sensitivity))
 
-    def std(self, uncertainty: float) -> float:
-        """The frictions' error for a relative stiffness error ``uncertainty`` (the config's claim, or the online
-        calibration's once it applied the stiffnesses: ``Estimator.use_stiffness``)."""
-        return uncertainty * self.cross / self.information if self.information > 0.0 else 0.0
+    @property
+    def std(self) -> float:
+        return self.uncertainty * self.cross / self.information if self.information > 0.0 else 0.0
 
 
 class FrictionEstimator(Estimator):
@@ -120,7 +120,7 @@ class FrictionEstimator(Estimator):
         self.observable = np.zeros(len(FRICTIONS), dtype=bool)
         self.yaw_acceleration = WheelAcceleration(YAW_ACCELERATION_WINDOW)
         self.last_friction = None
-        self.model_error = FrictionModelError(self.dt)
+        self.model_error = FrictionModelError(config.vehicle.cornering_stiffness_uncertainty, self.dt)
         self.recent = deque(maxlen=max(1, round(SETTLE_WINDOW / self.dt)))  # the frictions over SETTLE_WINDOW
         correlation = self.est.friction_correlation
         mixing = correlation * np.ones((4, 4)) + (1.0 - correlation) * np.eye(4)
@@ -225,8 +225,7 @@ class FrictionEstimator(Estimator):
         frictions, filter_stds = self.filter.x[two_track.MU], std[two_track.MU] * validity.inflation(ratio)
         self.recent.append(frictions.copy())
         movement = np.ptp(self.recent, axis=0)
-        stiffness = self.model_error.std(self.vehicle.cornering_stiffness_uncertainty)
-        spread = np.sqrt(filter_stds**2 + stiffness**2 + movement**2)
+        spread = np.sqrt(filter_stds**2 + self.model_error.std**2 + movement**2)
         friction_stds = np.maximum(spread, np.abs(frictions - frictions.mean()))  # never more certain than its split
         pressed = self.filter.parameters.pressed
         every_wheel = ("after_reset" if causes["beta"] == "after_reset"

@@ -43,9 +43,10 @@ Published standard deviations get these terms beyond the filter's covariance:
   quadrature, at ``|v r|`` for ``ay`` (the steady-state ay; a vibrating ay would shake the term), held as a
   leaky maximum over ``MODEL_ERROR_MEMORY`` (:meth:`canest.estimation.judge.StateJudge.sideslip_model_std`). A user's
   stiffness is uncertain by ``e_0``
-  (``vehicle.cornering_stiffness_uncertainty``: 0.3 for textbook values; once the online calibration applies
-  learned stiffnesses, their error, :attr:`canest.estimation.online_calibration.OnlineCalibration.stiffness_error`,
-  takes its place); a model with linear tires adds
+  (``vehicle.cornering_stiffness_uncertainty``: 0.3 for textbook values; for linear tires, once the online
+  calibration applies learned stiffnesses, their error,
+  :attr:`canest.estimation.online_calibration.OnlineCalibration.stiffness_error`, takes its place:
+  ``Estimator.use_stiffness``); a model with linear tires adds
   ``e_2 (ay / g)^2``, because every tire's secant stiffness falls with the
   square of its slip at first (the cubic term of any tire curve:
   ``sin(C atan(B a)) ~ C B a - k a^3``): ``e_2`` (:data:`DEGRESSIVE_STIFFNESS`)
