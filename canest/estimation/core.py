@@ -140,7 +140,7 @@ class Estimator:
                                    if name in ACCELEROMETERS]
         self.integrates_ax = getattr(model, "vx_noise_key", "vx") == "vx_from_ax"
         self.steering_zero = steering_zero(config)
-        # factors on the configured cornering stiffnesses and their error (:meth:`use_stiffness`)
+        # factors on the configured cornering stiffnesses and the learned error passed (:meth:`use_stiffness`)
         self.stiffness = (1.0, 1.0, None)
 
     def use_stiffness(self, front: float, rear: float, error: float | None = None) -> None:
