@@ -985,7 +985,6 @@ def test_a_parameter_the_window_tells_no_better_than_the_prior_is_left_out(confi
         assert calibration.evidence[NAMES.index(name)] == WINDOW, name
 
 
-
 @pytest.mark.parametrize("filter_name, learned", [("ckf", True), ("jckf", False), ("dici-gfckf", False)])
 def test_the_learned_stiffness_error_replaces_the_claim_for_linear_tires_only(config, filter_name, learned):
     """Linear tires' sideslip term is the stiffness's error, which the learner measures; a tire curve's term also

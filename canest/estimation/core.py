@@ -140,8 +140,8 @@ class Estimator:
                                    if name in ACCELEROMETERS]
         self.integrates_ax = getattr(model, "vx_noise_key", "vx") == "vx_from_ax"
         self.steering_zero = steering_zero(config)
-        # factors on the configured cornering stiffnesses and the learned error passed (:meth:`use_stiffness`)
-        self.stiffness = (1.0, 1.0, None)
+        # factors on the configured cornering stiffnesses and their uncertainty in use (:meth:`use_stiffness`)
+        self.stiffness = (1.0, 1.0, config.vehicle.cornering_stiffness_uncertainty)
 
     def use_stiffness(self, front: float, rear: float, error: float | None = None) -> None:
         """Run the model and judge the sideslip with the configured cornering stiffnesses times ``front`` and
@@ -154,14 +154,14 @@ class Estimator:
         slip stiffness and the nominal friction (the forces' process noise, the frictions' stiffness term), none
         of which the learner measures, and on a vibrating IMU 0.05 left jckf's sideslip and dici-gfckf's forces
         valid but wrong (README "How far to trust the output")."""
-        if (front, rear, error) == self.stiffness:
-            return
-        self.stiffness = (front, rear, error)
         p = self.config.vehicle
-        learned = error is not None and getattr(self.model, "linear_tires", False)
+        uncertainty = error if error is not None and self.judge.linear_tires else p.cornering_stiffness_uncertainty
+        if (front, rear, uncertainty) == self.stiffness:  # a tire curve's model is not rebuilt for an unused error
+            return
+        self.stiffness = (front, rear, uncertainty)
         self.vehicle = replace(p, cornering_stiffness_front=front * p.cornering_stiffness_front,
                                cornering_stiffness_rear=rear * p.cornering_stiffness_rear,
-                               cornering_stiffness_uncertainty=error if learned else p.cornering_stiffness_uncertainty)
+                               cornering_stiffness_uncertainty=uncertainty)
         self.model.use_vehicle(self.vehicle)
         self.judge.use_vehicle(self.vehicle)
         self.steering_zero.use_vehicle(self.vehicle)
