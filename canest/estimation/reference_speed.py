@@ -81,14 +81,15 @@ def tire_usage(torques, loads, wheel_radius: float) -> list:
     return [torque / (wheel_radius * max(load, 1.0)) for torque, load in zip(torques, loads)]
 
 
-def tick_usage(inputs, geometry, wheel_radius: float, layout=None) -> list:
+def tick_usage(inputs, geometry, wheel_radius: float, layout=None, use_torques: bool = True) -> list:
     """Per wheel ``Fx / Fz`` of one tick (:class:`canest.estimation.inputs.TickInputs`) at the loads of its ax and
     ay (``geometry``: a :class:`canest.models.wheels.WheelGeometry`): :func:`tire_usage` of its motor torques (0
-    where not mapped) or, where they are not all in and a ``layout`` (:class:`canest.models.wheel_force.DriveLayout`)
-    is given, the share of ``m ax`` the drive layout or the brake balance asks of each wheel."""
+    where not mapped) or, where they are not all in (or not ``use_torques``) and a ``layout``
+    (:class:`canest.models.wheel_force.DriveLayout`) is given, the share of ``m ax`` the drive layout or the brake
+    balance asks of each wheel."""
     ax = inputs.current("ax")
     loads = geometry.loads(ax, inputs.current("ay")).tolist()
-    if layout is None or inputs.has(*TORQUES):
+    if layout is None or (use_torques and inputs.has(*TORQUES)):
         return tire_usage([inputs.values.get(torque, 0.0) for torque in TORQUES], loads, wheel_radius)
     force = layout.mass * ax
     shares = layout.drive if ax >= 0.0 else layout.brake
