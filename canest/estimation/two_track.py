@@ -142,7 +142,9 @@ class FrictionEstimator(Estimator):
         self.recent = deque(maxlen=max(1, round(SETTLE_WINDOW / self.dt)))  # the frictions over SETTLE_WINDOW
         self.regime = validity.LinearRegime(config.vehicle, self.dt)
         self.limit_ticks = 0  # ticks on end on which a tire's limit showed in the measurements
-        self.limit_shown_at, self.now = -math.inf, 0.0  # s: when it last showed for LIMIT_PERSISTENCE on end; now
+        self.since_limit = math.inf  # ticks since it last showed for LIMIT_PERSISTENCE on end
+        self.persistence, self.memory = round(LIMIT_PERSISTENCE / self.dt), round(LIMIT_MEMORY / self.dt)
+        self.reference = None  # (speed, std) of this tick's reference speed, :meth:`_derived`
         correlation = self.est.friction_correlation
         mixing = correlation * np.ones((4, 4)) + (1.0 - correlation) * np.eye(4)
         for matrix in (self.Q, self.p0):  # the four wheels are on one road: correlated prior and random walk
@@ -154,6 +156,8 @@ class FrictionEstimator(Estimator):
             self.last_friction = self.filter.x[two_track.MU].copy()
         super().reset()
         self.yaw_acceleration.reset()
+        self.regime.reset()  # a non-finite vx would stay in its lag; the limit seen (since_limit) stays: a fact
+        self.limit_ticks = 0
 
     def _initial_state(self, inputs: TickInputs) -> np.ndarray:
         """Wheel speeds as measured; friction as before a reset, else at the tire's nominal value (dry)."""
@@ -175,7 +179,7 @@ class FrictionEstimator(Estimator):
             rate = self.yaw_acceleration.update(t, [inputs.values["yaw_rate"]])[0]
             if lateral_ok and self.yaw_acceleration.samples == YAW_ACCELERATION_WINDOW:
                 derived["yaw_acceleration"] = (rate, self.est.measurement_noise["yaw_acceleration"], 0.0)
-        reference = self._reference_speed(inputs, t)
+        self.reference = reference = self._reference_speed(inputs, t)
         if reference is not None:
             derived["vx_reference"] = (*reference, 0.0)
         return derived
@@ -194,7 +198,7 @@ class FrictionEstimator(Estimator):
         road friction"); a refused rise leaves the friction and its variance
         as they were (:class:`canest.filters.parameters.ParameterBlock`).
         """
-        self._watch_regime(inputs, u, lateral_ok, t)
+        self._note_limit(inputs, u, lateral_ok, t)
         states = np.stack([self._plausibly_lower_friction(), self.filter.x])
         sensitivity = self.model.friction_sensitivity(states, u)
         excited, at_limit = sensitivity >= self.est.friction_excitation
@@ -205,42 +209,47 @@ class FrictionEstimator(Estimator):
         self.filter.parameters.may_rise = at_limit
         return self._apply(channels, u, t)
 
-    def _watch_regime(self, inputs: TickInputs, u: np.ndarray, lateral_ok: bool, t: float) -> None:
-        """Note when a tire's limit has shown in the measurements for ``LIMIT_PERSISTENCE`` s on end (one outlier is
-        not a limit): the measured yaw rate left the linear steady-state yaw rate of the steering
-        (:class:`canest.estimation.validity.LinearRegime`, judged where the single-track sideslip's is: lateral
-        model on, steering zero learned, nothing saturated; the understeer gradient of the stiffnesses in use) or
-        a wheel slipped beyond the linear slip its force needs (:meth:`_slipping`)."""
-        self.now = t
-        lateral = (lateral_ok and self.steering_zero.learned and inputs.has("yaw_rate")
-                   and not any(inputs.saturated(n) for n in ("ay", "steering_wheel_angle", "yaw_rate"))
-                   and not self.regime.inside(u[two_track.DELTA], self.filter.x[two_track.VX],
-                                              inputs.values["yaw_rate"]))
-        self.limit_ticks = self.limit_ticks + 1 if lateral or self._slipping(inputs, t) else 0
-        if self.limit_ticks * self.dt >= LIMIT_PERSISTENCE:
-            self.limit_shown_at = t
+    def _note_limit(self, inputs: TickInputs, u: np.ndarray, lateral_ok: bool, t: float) -> None:
+        """Count the ticks since a tire's limit last showed in the measurements for ``LIMIT_PERSISTENCE`` s on end
+        (one outlier is not a limit): the measured yaw rate left the ESC band around the linear steady-state yaw
+        rate of the steering (:class:`canest.estimation.validity.LinearRegime` at the understeer gradient of the
+        stiffnesses in use; judged with the lateral model on and the steering zero learned, its lag restarted
+        where not, so that it never resumes from a stale steady yaw rate) or a wheel slipped beyond the linear
+        slip its force needs (:meth:`_slipping`)."""
+        judged = lateral_ok and self.steering_zero.learned and inputs.has("yaw_rate")
+        if not judged:
+            self.regime.reset()
+        yaw_off_linear = judged and not self.regime.inside(u[two_track.DELTA], self.filter.x[two_track.VX],
+                                                           inputs.values["yaw_rate"])
+        self.limit_ticks = self.limit_ticks + 1 if yaw_off_linear or self._slipping(inputs, u, t) else 0
+        self.since_limit = 0 if self.limit_ticks >= self.persistence else self.since_limit + 1
 
-    def _slipping(self, inputs: TickInputs, t: float) -> bool:
+    def _limit_recent(self) -> bool:
+        """A tire's limit showed in the measurements in the last ``LIMIT_MEMORY`` s (:meth:`_note_limit`)."""
+        return self.since_limit <= self.memory
+
+    def _slipping(self, inputs: TickInputs, u: np.ndarray, t: float) -> bool:
         """A wheel's slip ratio against its own centre's speed (the reference speed, updated by the wheels this
         tick, moved to each wheel by the yaw rate, the sideslip and the steering) is beyond the linear slip its
-        usage needs (``Fx / Fz`` over the tire's slip stiffness) by more than ``SLIP_TOLERANCE``: spinning or
-        locking. Braking takes the brake balance's share of ``m ax`` where larger than the motor torques' (friction
-        brakes the torques do not show)."""
-        speed = self.reference_speed.speed
-        if (self.reference_speed.wheels_t != t or speed is None or speed < self.est.min_speed
-                or not inputs.has("yaw_rate", *WHEEL_SPEEDS)):
+        usage needs (``Fx / Fz`` over the tire's slip stiffness) by more than ``SLIP_TOLERANCE``, the reference's
+        own std (per unit speed: an integrated ax on a grade) in quadrature: spinning or locking. Braking takes
+        the brake balance's share of ``m ax`` where larger than the motor torques' (friction brakes the torques
+        do not show)."""
+        if (self.reference is None or self.reference_speed.wheels_t != t or self.reference[0] < self.est.min_speed
+                or not inputs.has("yaw_rate")):
             return False
+        speed, std = self.reference
         usage = np.array(tick_usage(inputs, self.geometry, self.vehicle.wheel_radius, self.layout))
         if inputs.current("ax") < 0.0:
             usage = np.minimum(usage, tick_usage(inputs, self.geometry, self.vehicle.wheel_radius, self.layout,
                                                  use_torques=False))
         beta = self.filter.x[two_track.BETA]
         v_long, _ = self.geometry.wheel_velocities(np.array([inputs.current("yaw_rate")]), np.array([speed]),
-                                                   np.array([speed * math.tan(beta)]), self._road_wheel_angle(inputs))
+                                                   np.array([speed * math.tan(beta)]), u[two_track.DELTA])
         slip = self.geometry.slip_ratios(np.array([inputs.values[name] for name in WHEEL_SPEEDS]), v_long[0])
         linear = usage / self.vehicle.tire.longitudinal_stiffness
         absolute, relative = SLIP_TOLERANCE
-        return bool(np.any(np.abs(slip - linear) > absolute + relative * np.abs(linear)))
+        return bool(np.any(np.abs(slip - linear) > math.hypot(absolute, std / speed) + relative * np.abs(linear)))
 
     def use_stiffness(self, front: float, rear: float, error: float | None = None) -> None:
         """As every model (:meth:`Estimator.use_stiffness`), and the limit's yaw test takes the understeer gradient
@@ -276,7 +285,7 @@ class FrictionEstimator(Estimator):
     def _extra_values(self, values: dict, valid: dict, causes: dict, std: np.ndarray, inputs: TickInputs,
                       ratios: dict) -> None:
         """Per wheel: friction is valid once excitation made it certain (std below ``MU_VALID_STD``) and a tire's
-        limit showed in the measurements within ``LIMIT_MEMORY`` s (:meth:`_watch_regime`; else "not_excited"), the
+        limit showed in the measurements within ``LIMIT_MEMORY`` s (:meth:`_note_limit`; else "not_excited"), the
         channels that show the tires' forces (ax, ay, yaw rate and acceleration) agree with the filter under the
         configured noise (module docstring, "a noisy IMU"; :mod:`canest.estimation.validity`; its std widened by their
         consistency ratio; not before they have been judged, nor in the second after a reset: the frictions
@@ -297,7 +306,7 @@ class FrictionEstimator(Estimator):
         every_wheel = ("after_reset" if causes["beta"] == "after_reset"
                        else "inconsistent" if ratio > validity.INCONSISTENT
                        else "uncertain" if not self.filter.parameters_valid
-                       else "not_excited" if math.isnan(ratio) or self.now - self.limit_shown_at > LIMIT_MEMORY
+                       else "not_excited" if math.isnan(ratio) or not self._limit_recent()
                        else None)  # what holds for all four alike
         wheel_causes = []
         for name, mu, mu_std, filter_std, observable, at_bound in zip(FRICTIONS, frictions, friction_stds,
