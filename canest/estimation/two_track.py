@@ -143,7 +143,7 @@ class FrictionEstimator(Estimator):
         self.regime = validity.LinearRegime(config.vehicle, self.dt)
         self.limit_ticks = 0  # ticks on end on which a tire's limit showed in the measurements
         self.since_limit = math.inf  # ticks since it last showed for LIMIT_PERSISTENCE on end
-        self.persistence, self.memory = round(LIMIT_PERSISTENCE / self.dt), round(LIMIT_MEMORY / self.dt)
+        self.persistence, self.memory = max(1, round(LIMIT_PERSISTENCE / self.dt)), round(LIMIT_MEMORY / self.dt)
         self.reference = None  # (speed, std) of this tick's reference speed, :meth:`_derived`
         correlation = self.est.friction_correlation
         mixing = correlation * np.ones((4, 4)) + (1.0 - correlation) * np.eye(4)
