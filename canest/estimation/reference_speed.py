@@ -118,6 +118,7 @@ class ReferenceSpeed:
         self.speed = None
         self.last_t = None
         self.wheels_t = None  # the last update with the wheels (:meth:`update`, not :meth:`coast`)
+        self.usage = None  # per wheel Fx / Fz of that update
         self.anchored_at = None
         self.anchor_std = self.anchored_std
         self.settled_at = math.inf  # from when the undriven pair may anchor the speed alone
@@ -155,6 +156,7 @@ class ReferenceSpeed:
         if self.undriven is not None:
             self._undriven_pair(t, acceleration, wheel_speeds, usage, in_step, front_excess)
         self.last_t = self.wheels_t = t
+        self.usage = usage
         return self.speed, self._std(t)
 
     def coast(self, t: float, acceleration: float, ax_density: float = 0.0) -> None:

@@ -239,7 +239,7 @@ class FrictionEstimator(Estimator):
                 or not inputs.has("yaw_rate")):
             return False
         speed, std = self.reference
-        usage = np.array(tick_usage(inputs, self.geometry, self.vehicle.wheel_radius, self.layout))
+        usage = np.array(self.reference_speed.usage)  # this tick's: the reference was updated by the wheels at t
         if inputs.current("ax") < 0.0:
             usage = np.minimum(usage, tick_usage(inputs, self.geometry, self.vehicle.wheel_radius, self.layout,
                                                  use_torques=False))
