@@ -259,9 +259,10 @@ def test_the_drives_are_cached_per_simulator_source(tmp_path):
 @pytest.mark.parametrize("maneuver, mu, seed, duration", [("country", 0.85, 3, 30.0), ("launch", 0.35, 0, None)])
 def test_a_friction_is_valid_only_after_the_car_showed_a_tire_s_limit(tmp_path, maneuver, mu, seed, duration):
     """On a country road's gentle curves (ay up to 2.4 m/s^2 on 0.85) jckf's frictions fell from 0.90 to
-    0.25-0.35, the model's error in the linear range read as friction, and were flagged valid on 10-26 % of this
-    drive's ticks, all wrong. A friction is valid only within seconds of a yaw response that left the linear one
-    or a wheel slipping beyond its linear slip (the launch on 0.35: measured there, and right)."""
+    0.25-0.35 (the cubature points' tail saturates its tires on any curve) and were flagged valid on 2-26 % of the
+    ticks of 30 s drives, 72-100 % of those wrong. A friction is valid only within seconds of a yaw response that
+    left the linear one or a wheel slipping beyond its linear slip (the launch on 0.35: measured there, and
+    right)."""
     case = honesty.Case(maneuver, 80.0, mu, seed, duration=duration)
     result = honesty.run_case(CONFIG, ["jckf"], case, tmp_path)
     scores = [honesty.summarize(f"mu_{wheel}", result["sums"]["jckf"][f"mu_{wheel}"])
