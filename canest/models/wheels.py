@@ -55,12 +55,19 @@ class WheelGeometry:
         """Steer angle of each wheel, shape (..., 4)."""
         return np.where(FRONT, np.asarray(delta, dtype=float)[..., None], 0.0)
 
-    def wheel_velocities(self, r, vx, vy, delta):
-        """(v_long, v_lat): each wheel centre's velocity in its own frame, shape (N, 4)."""
-        vx_w = vx[:, None] - r[:, None] * self.pos_y
-        vy_w = vy[:, None] + r[:, None] * self.pos_x
+    def rotation(self, delta):
+        """(cos, sin) of each wheel's steer angle, shape (..., 4)."""
         steer = self.steer(delta)
-        cos_d, sin_d = np.cos(steer), np.sin(steer)
+        return np.cos(steer), np.sin(steer)
+
+    def wheel_velocities(self, r, vx, vy, delta, rotation=None):
+        """(v_long, v_lat): each wheel centre's velocity in its own frame, shape (N, 4) (scalars: (4,)).
+
+        ``rotation``: :meth:`rotation` of ``delta``, where the caller has it already (the plant's hot loop).
+        """
+        vx_w = vx[..., None] - r[..., None] * self.pos_y
+        vy_w = vy[..., None] + r[..., None] * self.pos_x
+        cos_d, sin_d = self.rotation(delta) if rotation is None else rotation
         return vx_w * cos_d + vy_w * sin_d, -vx_w * sin_d + vy_w * cos_d
 
     @staticmethod
@@ -75,8 +82,7 @@ class WheelGeometry:
 
     def body_accelerations(self, fx, fy, delta):
         """(ax, ay, dr/dt) of eqs 1-3 for wheel-frame forces of shape (N, 4)."""
-        steer = self.steer(delta)
-        cos_d, sin_d = np.cos(steer), np.sin(steer)
+        cos_d, sin_d = self.rotation(delta)
         fx_b = fx * cos_d - fy * sin_d
         fy_b = fx * sin_d + fy * cos_d
         p = self.vehicle

@@ -27,7 +27,7 @@ import numpy as np
 
 from canest.params import VehicleParams
 from canest.models.wheels import FRONT, WheelGeometry
-from canest.sim.tire import TireParams, combined_forces
+from canest.sim.tire import SlipCurves, TireParams, combined_forces
 
 AIR_DENSITY = 1.2
 DRAG_AREA = 0.7  # Cd * A, m^2
@@ -63,6 +63,7 @@ class TwoTrackPlant:
         self.wheels = WheelGeometry(vehicle)
         self.pos_x, self.pos_y = self.wheels.pos_x, self.wheels.pos_y
         self.fz_static = self.wheels.static_load
+        self.slip_curves = SlipCurves.of(tire, FRONT)
 
     def initial_state(self, speed: float) -> np.ndarray:
         s = np.zeros(STATE_SIZE)
@@ -71,19 +72,18 @@ class TwoTrackPlant:
         return s
 
     def _forces(self, s: np.ndarray, delta: float):
-        steer = self.wheels.steer(delta)
-        cos_d, sin_d = np.cos(steer), np.sin(steer)
-        v_long, v_lat = (v[0] for v in self.wheels.wheel_velocities(s[R:R + 1], s[VX:VX + 1], s[VY:VY + 1], delta))
+        cos_d, sin_d = self.wheels.rotation(delta)
+        v_long, v_lat = self.wheels.wheel_velocities(s[R], s[VX], s[VY], delta, (cos_d, sin_d))
         speed = np.maximum(np.abs(v_long), MIN_SLIP_SPEED)
         alpha = -np.arctan2(v_lat, speed)
         kappa = (s[W] * self.p.wheel_radius - v_long) / speed
         fz = self.wheels.loads(s[AXL], s[AYL])
-        fx, fy_ss = combined_forces(alpha, kappa, fz, self.mu, self.fz_static, FRONT, self.tire)
-        return steer, cos_d, sin_d, speed, alpha, kappa, fz, fx, fy_ss
+        fx, fy_ss = combined_forces(alpha, kappa, fz, self.mu, self.fz_static, self.slip_curves)
+        return cos_d, sin_d, speed, alpha, kappa, fz, fx, fy_ss
 
     def derivatives(self, s: np.ndarray, delta: float, torque: np.ndarray):
         p = self.p
-        steer, cos_d, sin_d, speed, alpha, kappa, fz, fx, fy_ss = self._forces(s, delta)
+        cos_d, sin_d, speed, alpha, kappa, fz, fx, fy_ss = self._forces(s, delta)
         fy = s[FY]
         fx_b = fx * cos_d - fy * sin_d
         fy_b = fx * sin_d + fy * cos_d
@@ -105,9 +105,9 @@ class TwoTrackPlant:
         d[AYL] = (ay - s[AYL]) / LOAD_TRANSFER_TAU
         return d, PlantOutputs(ax, ay, fx, fy.copy(), fz, alpha, kappa)
 
-    def step(self, s: np.ndarray, delta: float, torque: np.ndarray, dt: float) -> np.ndarray:
-        """One RK4 step with steering and torques held."""
-        k1, _ = self.derivatives(s, delta, torque)
+    def step(self, s: np.ndarray, delta: float, torque: np.ndarray, dt: float, slope: np.ndarray | None = None):
+        """One RK4 step with steering and torques held; ``slope``: :meth:`derivatives` at ``s``, if known."""
+        k1 = self.derivatives(s, delta, torque)[0] if slope is None else slope
         k2, _ = self.derivatives(s + 0.5 * dt * k1, delta, torque)
         k3, _ = self.derivatives(s + 0.5 * dt * k2, delta, torque)
         k4, _ = self.derivatives(s + dt * k3, delta, torque)

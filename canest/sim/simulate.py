@@ -106,7 +106,7 @@ def simulate(config: Config, maneuver: str, speed_kmh: float, mu, *, duration=No
             swa = driver.steering_wheel_angle(t, state[X], state[Y], state[PSI], state[VX], CONTROL_DT)
             torque = driver.motor_torques(t, state[VX], state[W], CONTROL_DT)
         delta = swa / vehicle.steering_ratio
-        _, outputs = plant.derivatives(state, delta, torque)
+        slope, outputs = plant.derivatives(state, delta, torque)
         if k % truth_every == 0:
             rows.append(_truth_row(t + start_time, state, outputs, delta, swa, plant.mu, torque))
         if schedule[0][0] <= t:
@@ -120,7 +120,7 @@ def simulate(config: Config, maneuver: str, speed_kmh: float, mu, *, duration=No
             raise SimulationError(f"the simulated car left the plant's valid range at t={t:.3f} s (vx={state[VX]:.2f} "
                                   "m/s, at least 0.5 m/s and finite): ask for a speed of at least 2 km/h, or a gentler "
                                   "maneuver (--amplitude) or more grip (--mu)")
-        state = plant.step(state, delta, torque, PLANT_DT)
+        state = plant.step(state, delta, torque, PLANT_DT, slope)
         if progress is not None and k % 1000 == 0:
             progress(k / steps)
     truth = {name: np.array([row[i] for row in rows]) for i, name in enumerate(TRUTH_COLUMNS)}

@@ -38,13 +38,27 @@ def slip_stiffness(coefficient: np.ndarray, fz: np.ndarray, fz_nominal: np.ndarr
     return cornering_stiffness(coefficient * fz_nominal, fz, fz_nominal, LOAD_SENSITIVITY)
 
 
-def combined_forces(alpha, kappa, fz, mu, fz_nominal, front_mask, tire: TireParams):
+@dataclass(frozen=True)
+class SlipCurves:
+    """Magic Formula coefficients of each wheel's longitudinal (row 0) and lateral (row 1) force, stacked so
+    that one evaluation gives both."""
+
+    stiffness: np.ndarray  # (2, 4), slip stiffness per unit nominal load
+    shape: np.ndarray  # (2, 1), C
+    curvature: np.ndarray  # (2, 1), E
+
+    @classmethod
+    def of(cls, tire: TireParams, front_mask: np.ndarray) -> "SlipCurves":
+        lateral = np.where(front_mask, tire.lateral_stiffness_front, tire.lateral_stiffness_rear)
+        return cls(np.stack((np.full(lateral.shape, tire.longitudinal_stiffness), lateral)),
+                   np.array([[tire.longitudinal_shape], [tire.lateral_shape]]),
+                   np.array([[tire.longitudinal_curvature], [tire.lateral_curvature]]))
+
+
+def combined_forces(alpha, kappa, fz, mu, fz_nominal, curves: SlipCurves):
     """Steady-state (Fx, Fy) of each tire from slip angle, slip ratio, load and friction."""
     peak = mu * np.maximum(fz, 0.0)
-    lateral_coeff = np.where(front_mask, tire.lateral_stiffness_front, tire.lateral_stiffness_rear)
-    fx = magic_formula(kappa, slip_stiffness(tire.longitudinal_stiffness, fz, fz_nominal),
-                       tire.longitudinal_shape, tire.longitudinal_curvature, peak)
-    fy0 = magic_formula(alpha, slip_stiffness(lateral_coeff, fz, fz_nominal),
-                        tire.lateral_shape, tire.lateral_curvature, peak)
-    usage = np.clip(fx / np.maximum(peak, 1e-6), -1.0, 1.0)
+    fx, fy0 = magic_formula(np.array((kappa, alpha)), slip_stiffness(curves.stiffness, fz, fz_nominal),
+                            curves.shape, curves.curvature, peak)
+    usage = np.minimum(np.maximum(fx / np.maximum(peak, 1e-6), -1.0), 1.0)
     return fx, fy0 * np.sqrt(1.0 - usage**2)
