@@ -21,6 +21,9 @@ import honesty  # noqa: E402
 FILTERS = ("ckf", "mcsckf", "svd-fckf", "jckf", "dici-gfckf")
 CALIBRATED = ("ckf", "mcsckf", "svd-fckf", "jckf")  # standard deviations covering the error at +-2 std
 VIBRATING = ("ckf", "dekf", "jckf", "dckf")  # replayed on the small grid with the IMU vibrating
+# jckf's sideslip holds half the sideslip its rear tires' saturation makes until the car shows a tire's limit (the
+# first seconds of these 4 s drives; README "How far to trust the output"): NEES 0.54 -> 0.44 here
+NEES_FLOOR = {("jckf", "beta"): 0.4}
 
 
 @pytest.fixture(scope="module")
@@ -48,7 +51,7 @@ def test_the_published_std_covers_the_error(scores, name):
         assert score.nees <= 2.0, (name, state, score)  # never overconfident on average
         assert score.valid > 0.4, (name, state, score)  # honesty by flagging everything invalid is no answer
     for state in ("yaw_rate", "beta"):  # nor so wide as to say little: the gyros' and the stiffness's std as they are
-        assert scores[name][state].nees >= 0.5, (name, state, scores[name][state])
+        assert scores[name][state].nees >= NEES_FLOOR.get((name, state), 0.5), (name, state, scores[name][state])
 
 
 def test_frictions_flagged_valid_are_right(scores):
@@ -272,3 +275,13 @@ def test_a_friction_is_valid_only_after_the_car_showed_a_tire_s_limit(tmp_path, 
     else:  # no tire's limit on these curves: the frictions are not measured, whatever the model made of them
         assert all(score.valid == 0.0 for score in scores), scores
         assert honesty.summarize("beta", result["sums"]["jckf"]["beta"]).valid > 0.5  # the sideslip still measured
+
+
+def test_a_sideslip_resting_on_a_saturation_the_car_has_not_shown_carries_it_in_its_std(tmp_path):
+    """On a vibrating country road's gentle curves on 0.85 jckf's frictions fall towards the friction the car uses
+    (README "Still weak") and its model's rear tires saturate where the plant's do not: the sideslip was 2-4 deg off
+    with a std below a third of that, valid (54-56 s into this drive: 1.3 % of its valid ticks). While the car shows
+    no tire's limit, the std holds half the sideslip the estimate's rear saturation makes beyond linear tires."""
+    case = honesty.Case("country", 80.0, 0.85, 4, duration=60.0, vibration=1.0)
+    score = honesty.summarize("beta", honesty.run_case(CONFIG, ["jckf"], case, tmp_path)["sums"]["jckf"]["beta"])
+    assert score.max_error > 2.0 and score.valid > 0.3 and score.vbw == 0.0, score

@@ -369,12 +369,21 @@ class Estimator:
         rests on it: :meth:`canest.estimation.judge.StateJudge.causes`); never for a model without frictions."""
         return False
 
+    def _sideslip_saturation_std(self) -> float:
+        """The sideslip's std (rad) from tire saturation the measurements have not shown (none for a model without
+        frictions: :meth:`canest.estimation.two_track.FrictionEstimator._sideslip_saturation_std`)."""
+        return 0.0
+
     def _rear_slip(self, x: np.ndarray) -> float:
-        """The rear wheels' mean slip angle (rad) at the estimate ``x`` (they do not steer: any road wheel angle)."""
+        """The rear wheels' mean slip angle (rad) at the estimate ``x``."""
+        return float(self._rear_slip_angles(x).mean())
+
+    def _rear_slip_angles(self, x: np.ndarray) -> np.ndarray:
+        """The rear wheels' slip angles (rad) at the estimate ``x`` (they do not steer: any road wheel angle)."""
         vx = x[self.vx]
         v_long, v_lat = self.geometry.wheel_velocities(np.array([x[self.yaw]]), np.array([vx]),
                                                        np.array([vx * math.tan(x[self.beta])]), 0.0)
-        return float(self.geometry.slip_angles(v_long, v_lat)[0, 2:].mean())
+        return self.geometry.slip_angles(v_long, v_lat)[0, 2:]
 
     def _measured(self, channels: ch.Channels) -> ch.Channels:
         """The channels as the filter takes them: an accelerometer channel's std never below its noise as its samples
@@ -427,7 +436,8 @@ class Estimator:
         std = np.sqrt(np.maximum(np.diag(self.filter.covariance), 0.0))
         rear_slip = None if self.judge.linear_tires else self._rear_slip(x)  # linear tires: the ay term
         offset_std = self.judge.sideslip_offset_std()  # a learned ay offset not applied: no model's Q holds it
-        beta_model_std = math.hypot(self.judge.sideslip_model_std(vx * x[self.yaw], rear_slip), offset_std)
+        beta_model_std = math.hypot(self.judge.sideslip_model_std(vx * x[self.yaw], rear_slip), offset_std,
+                                    self._sideslip_saturation_std())
         drift = self.judge.drift(inputs, vx, beta, math.hypot(std[self.beta], beta_model_std),
                                  reference.last_t != t or reference.anchored_at == t)
         carried = self.covariance_has_tire_error and not self.low_speed  # the model's Q has the tire error

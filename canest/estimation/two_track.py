@@ -100,6 +100,9 @@ EVIDENCE_MEMORY = 2.0  # s of excited driving over which the frictions' model er
 SETTLE_WINDOW = 1.0  # s over which the range a friction spanned is part of its std
 LIMIT_MEMORY = 5.0  # s after a tire's limit last showed in what the car measures that a friction may be valid
 LIMIT_PERSISTENCE = 0.1  # s on end a limit must show for: one outlier of the gyro or a wheel is not a limit
+# std of a sideslip resting on a saturation not shown, per unit of the sideslip that saturation makes: linear tires
+# and the estimate's saturated ones explain the measurements alike, and half their distance puts either within 2 std
+UNSHOWN_SATURATION_STD = 0.5
 SLIP_TOLERANCE = (0.015, 0.5)  # slip ratio plus a share of the linear slip: a wheel's slip beyond is past linear
 
 
@@ -145,6 +148,7 @@ class FrictionEstimator(Estimator):
         self.since_limit = math.inf  # ticks since it last showed for LIMIT_PERSISTENCE on end
         self.persistence, self.memory = max(1, round(LIMIT_PERSISTENCE / self.dt)), round(LIMIT_MEMORY / self.dt)
         self.reference = None  # (speed, std) of this tick's reference speed, :meth:`_derived`
+        self.saturation_slip = 0.0  # rad of rear slip angle from a saturation not shown, :meth:`_saturation_slip`
         correlation = self.est.friction_correlation
         mixing = correlation * np.ones((4, 4)) + (1.0 - correlation) * np.eye(4)
         for matrix in (self.Q, self.p0):  # the four wheels are on one road: correlated prior and random walk
@@ -158,6 +162,7 @@ class FrictionEstimator(Estimator):
         self.yaw_acceleration.reset()
         self.regime.reset()  # a non-finite vx would stay in its lag; the limit seen (since_limit) stays: a fact
         self.limit_ticks = 0
+        self.saturation_slip = 0.0
 
     def _initial_state(self, inputs: TickInputs) -> np.ndarray:
         """Wheel speeds as measured; friction as before a reset, else at the tire's nominal value (dry)."""
@@ -207,7 +212,9 @@ class FrictionEstimator(Estimator):
         if self.observable.any():
             self.model_error.add(sensitivity[1], self.model.stiffness_sensitivity(self.filter.x, u))
         self.filter.parameters.may_rise = at_limit
-        return self._apply(channels, u, t)
+        diverged = self._apply(channels, u, t)
+        self.saturation_slip = 0.0 if self._limit_recent() else self._saturation_slip(u)
+        return diverged
 
     def _note_limit(self, inputs: TickInputs, u: np.ndarray, lateral_ok: bool, t: float) -> None:
         """Count the ticks since a tire's limit last showed in the measurements for ``LIMIT_PERSISTENCE`` s on end
@@ -223,6 +230,35 @@ class FrictionEstimator(Estimator):
                                                            inputs.values["yaw_rate"])
         self.limit_ticks = self.limit_ticks + 1 if yaw_off_linear or self._slipping(inputs, u, t) else 0
         self.since_limit = 0 if self.limit_ticks >= self.persistence else self.since_limit + 1
+
+    def _saturation_slip(self, u: np.ndarray) -> float:
+        """How much of the estimate's sideslip its rear tires' saturation makes (rad): the rear wheels' mean slip
+        angle less the slip angle linear tires of the same cornering stiffness need for the same forces (after
+        the friction circle: a driven wheel's force rests on friction too; at the nominal friction a little of
+        the curve's own bend). The sideslip is ``b r / vx`` less the rear slip angle, so a sideslip resting on a
+        friction the car has not confirmed may be off by that much (:meth:`_sideslip_saturation_std`). None below
+        ``min_speed`` (the sideslip is not published there) or for a state that is not finite (reset next)."""
+        x = self.filter.x
+        if x[two_track.VX] < self.est.min_speed or not np.all(np.isfinite(x)):
+            return 0.0
+        _, fy, _, _ = self.model.forces(x[None, :], u)
+        wheels = self.model.wheels  # the stiffnesses in use
+        stiffness = wheels.cornering_stiffness(wheels.loads(u[two_track.AX], u[two_track.AY]), self.model.tire)[2:]
+        loaded = stiffness > 0.0  # a lifted wheel has no slip angle to speak of
+        if not loaded.any():
+            return 0.0
+        linear = fy[0, 2:][loaded] / stiffness[loaded]
+        return abs(float(self._rear_slip_angles(x)[loaded].mean() - linear.mean()))
+
+    def _sideslip_saturation_std(self) -> float:
+        """The sideslip's std where it rests on tire saturation the car has not shown: while no tire's limit showed
+        in the last ``LIMIT_MEMORY`` s (:meth:`_note_limit`) the measurements fit linear tires as well as the
+        estimate's saturated ones, so the sideslip its rear tires' saturation makes (:meth:`_saturation_slip`, this
+        tick's update) is not measured; ``UNSHOWN_SATURATION_STD`` of it puts either within 2 std. On a gentle
+        country road the frictions fall towards the friction the car uses (README "Tire forces and road
+        friction", "Still weak") and the sideslip with them. Not held over a second as the stiffness term is
+        (:meth:`canest.estimation.judge.StateJudge.sideslip_model_std`): it is the estimate's own, without lag."""
+        return UNSHOWN_SATURATION_STD * self.saturation_slip
 
     def _limit_recent(self) -> bool:
         """A tire's limit showed in the measurements in the last ``LIMIT_MEMORY`` s (:meth:`_note_limit`)."""

@@ -60,7 +60,10 @@ Published standard deviations get these terms beyond the filter's covariance:
   the rear slip angle's. It equals the linear term at small slip and grows
   past it near the limit, where ``F / C_r`` had left jckf's and dckf's
   sideslip valid but wrong on 0.7 and 1.2 % of the ticks of cars drawn as
-  wrong as their config admits (``tools/honesty.py --car drawn``);
+  wrong as their config admits (``tools/honesty.py --car drawn``); for the
+  friction models, while the car has shown no tire's limit, the term also
+  holds half the sideslip their rear tires' saturation makes beyond linear tires
+  (:meth:`canest.estimation.two_track.FrictionEstimator._saturation_slip`);
 - the sideslip is never published more certain than its remembered mismatch
   with the kinematic sideslip (:class:`KinematicCheck`), and vx's std grows
   by ``|r|`` times the lateral velocity's std while the wheels do not measure
