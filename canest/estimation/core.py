@@ -375,15 +375,11 @@ class Estimator:
         return 0.0
 
     def _rear_slip(self, x: np.ndarray) -> float:
-        """The rear wheels' mean slip angle (rad) at the estimate ``x``."""
-        return float(self._rear_slip_angles(x).mean())
-
-    def _rear_slip_angles(self, x: np.ndarray) -> np.ndarray:
-        """The rear wheels' slip angles (rad) at the estimate ``x`` (they do not steer: any road wheel angle)."""
+        """The rear wheels' mean slip angle (rad) at the estimate ``x`` (they do not steer: any road wheel angle)."""
         vx = x[self.vx]
         v_long, v_lat = self.geometry.wheel_velocities(np.array([x[self.yaw]]), np.array([vx]),
                                                        np.array([vx * math.tan(x[self.beta])]), 0.0)
-        return self.geometry.slip_angles(v_long, v_lat)[0, 2:]
+        return float(self.geometry.slip_angles(v_long, v_lat)[0, 2:].mean())
 
     def _measured(self, channels: ch.Channels) -> ch.Channels:
         """The channels as the filter takes them: an accelerometer channel's std never below its noise as its samples

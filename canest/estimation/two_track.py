@@ -232,23 +232,14 @@ class FrictionEstimator(Estimator):
         self.since_limit = 0 if self.limit_ticks >= self.persistence else self.since_limit + 1
 
     def _saturation_slip(self, u: np.ndarray) -> float:
-        """How much of the estimate's sideslip its rear tires' saturation makes (rad): the rear wheels' mean slip
-        angle less the slip angle linear tires of the same cornering stiffness need for the same forces (after
-        the friction circle: a driven wheel's force rests on friction too; at the nominal friction a little of
-        the curve's own bend). The sideslip is ``b r / vx`` less the rear slip angle, so a sideslip resting on a
-        friction the car has not confirmed may be off by that much (:meth:`_sideslip_saturation_std`). None below
-        ``min_speed`` (the sideslip is not published there) or for a state that is not finite (reset next)."""
+        """How much of the estimate's sideslip its rear tires' saturation makes (rad,
+        :meth:`canest.models.two_track.TwoTrackModel.rear_saturation_slip`): a sideslip resting on a friction the
+        car has not confirmed may be off by that much (:meth:`_sideslip_saturation_std`). None below ``min_speed``
+        (the sideslip is not published there) or for a state that is not finite (reset next)."""
         x = self.filter.x
         if x[two_track.VX] < self.est.min_speed or not np.all(np.isfinite(x)):
             return 0.0
-        _, fy, _, _ = self.model.forces(x[None, :], u)
-        wheels = self.model.wheels  # the stiffnesses in use
-        stiffness = wheels.cornering_stiffness(wheels.loads(u[two_track.AX], u[two_track.AY]), self.model.tire)[2:]
-        loaded = stiffness > 0.0  # a lifted wheel has no slip angle to speak of
-        if not loaded.any():
-            return 0.0
-        linear = fy[0, 2:][loaded] / stiffness[loaded]
-        return abs(float(self._rear_slip_angles(x)[loaded].mean() - linear.mean()))
+        return self.model.rear_saturation_slip(x, u)
 
     def _sideslip_saturation_std(self) -> float:
         """The sideslip's std where it rests on tire saturation the car has not shown: while no tire's limit showed

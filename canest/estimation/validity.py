@@ -63,7 +63,7 @@ Published standard deviations get these terms beyond the filter's covariance:
   wrong as their config admits (``tools/honesty.py --car drawn``); for the
   friction models, while the car has shown no tire's limit, the term also
   holds half the sideslip their rear tires' saturation makes beyond linear tires
-  (:meth:`canest.estimation.two_track.FrictionEstimator._saturation_slip`);
+  (:meth:`canest.models.two_track.TwoTrackModel.rear_saturation_slip`);
 - the sideslip is never published more certain than its remembered mismatch
   with the kinematic sideslip (:class:`KinematicCheck`), and vx's std grows
   by ``|r|`` times the lateral velocity's std while the wheels do not measure

@@ -65,6 +65,24 @@ class TwoTrackModel:
         """Wheel-frame (Fx, Fy), their pure-slip longitudinal slope dFx/ds and the wheel speeds v_long, all (N, 4).
 
         ``stiffness_scale`` (a scalar or one per row, shape (N, 1)) multiplies both slip stiffnesses."""
+        return self._tire_forces(X, u, stiffness_scale)[:4]
+
+    def rear_saturation_slip(self, x: np.ndarray, u: np.ndarray) -> float:
+        """The rear wheels' mean slip angle at the state ``x`` (n,) less the slip angle linear tires of the same
+        cornering stiffness need for the same lateral forces (rad, in absolute value; after the friction circle: a
+        driven wheel's force rests on friction too): the sideslip, ``b r / vx`` less the rear slip angle, that the
+        rear tires' saturation at the estimated frictions makes. A lifted wheel (no load, no stiffness) is left out;
+        none loaded: 0."""
+        _, fy, _, _, alpha, stiffness = self._tire_forces(x[None, :], u)
+        fy, alpha = fy[0, 2:], alpha[0, 2:]
+        stiffness = np.broadcast_to(stiffness, (1, 4))[0, 2:]  # (4,): one input's loads
+        loaded = stiffness > 0.0
+        if not loaded.any():
+            return 0.0
+        return abs(float(alpha[loaded].mean() - (fy[loaded] / stiffness[loaded]).mean()))
+
+    def _tire_forces(self, X: np.ndarray, u: np.ndarray, stiffness_scale=1.0):
+        """:meth:`forces`, and each wheel's slip angle (N, 4) and cornering stiffness (N, 4; (4,) for a scalar scale)."""
         r, vx = X[:, YAW], np.maximum(X[:, VX], MIN_WHEEL_SPEED)
         v_long, v_lat = self.wheels.wheel_velocities(r, vx, vx * np.tan(X[:, BETA]), u[DELTA])
         alpha = self.wheels.slip_angles(v_long, v_lat)
@@ -78,7 +96,7 @@ class TwoTrackModel:
         fy = magic_formula(alpha, lateral_stiffness, t.lateral_shape, t.lateral_curvature, peak)
         slope = magic_formula_slope(slip, long_stiffness, t.longitudinal_shape, t.longitudinal_curvature, peak)
         fx, fy = friction_circle(fx, fy, peak)
-        return fx, fy, slope, np.maximum(v_long, MIN_WHEEL_SPEED)
+        return fx, fy, slope, np.maximum(v_long, MIN_WHEEL_SPEED), alpha, lateral_stiffness
 
     def transition(self, X: np.ndarray, u: np.ndarray, dt: float) -> np.ndarray:
         p = self.vehicle
