@@ -201,8 +201,10 @@ def test_the_lateral_forces_std_is_the_tire_curves_error_not_a_random_walks(tmp_
     """The tire-force model's forces relax towards the tire curve; their std was that of a 3000 N/sqrt(s) random
     walk against the relaxation (336 N on every wheel, NEES 0.08-0.61, mean 0.28, on this drive of a car drawn
     with its stiffnesses off). It is now the stiffness uncertainty's share of each force, moving an axle's two
-    wheels together, over a 300 N/sqrt(s) floor. The sideslip's covariance holds that error too, and the
-    stiffness term of the other models added on top of it doubled it (NEES 0.35 on this drive, 1.17 once)."""
+    wheels together, over a 300 N/sqrt(s) floor. The sideslip's covariance holds that error too, as a relaxing
+    noise: the stiffness term of the other models added on top of it doubled it (NEES 0.35 on this drive, 1.26
+    once); it is the std's floor instead (0.40: wider than this car's error, a stiffness within 13 % of the config's,
+    needs; the next test shows why it must be there)."""
     case = honesty.Case("sine", 80.0, 0.85, 2, car="drawn")
     result = honesty.run_case(CONFIG, ["dici-gfckf"], case, tmp_path)
     scores = [honesty.summarize(f"fy_{wheel}", result["sums"]["dici-gfckf"][f"fy_{wheel}"])
@@ -210,7 +212,19 @@ def test_the_lateral_forces_std_is_the_tire_curves_error_not_a_random_walks(tmp_
     assert all(score.valid > 0.3 and score.vbw == 0.0 for score in scores), scores
     assert 0.4 <= sum(score.nees for score in scores) / len(scores) <= 2.0, scores
     sideslip = honesty.summarize("beta", result["sums"]["dici-gfckf"]["beta"])
-    assert sideslip.valid > 0.3 and sideslip.vbw == 0.0 and 0.5 <= sideslip.nees <= 2.0, sideslip
+    assert sideslip.valid > 0.3 and sideslip.vbw == 0.0 and 0.3 <= sideslip.nees <= 2.0, sideslip
+
+
+def test_the_tire_force_sideslip_std_is_never_below_a_stiffness_error_held_steadily(tmp_path):
+    """This car's rear stiffness is x0.77 of its config's (within the 15 % it claims at 1.6 std). The tire-force
+    model's covariance holds a stiffness error as a noise relaxing within the tires' relaxation length, and in the
+    step steer's steady state the measurements average it away: on a vibrating IMU, whose kinematic check cannot
+    see 1.2 deg, dici-gfckf's sideslip was 1.2 deg off with a std of 0.36, valid but wrong on 57 % of its valid
+    ticks. The stiffness term is now the std's floor."""
+    case = honesty.Case("step", 80.0, 0.85, 0, vibration=1.0, car="drawn")
+    result = honesty.run_case(CONFIG, ["dici-gfckf"], case, tmp_path)
+    score = honesty.summarize("beta", result["sums"]["dici-gfckf"]["beta"])
+    assert score.valid > 0.1 and score.vbw == 0.0 and score.max_error > 1.0, score
 
 
 def test_a_vibrating_ay_does_not_move_force_between_an_axle_s_wheels(tmp_path):

@@ -153,7 +153,7 @@ class StateJudge:
 
     def widen(self, std: np.ndarray, index: dict, ratios: dict, beta_model_std: float,
               lateral: float = 0.0, gyro_noise: float = 1.0, walk: float = 0.0, walk_apart: bool = False,
-              reference_gap: float = 0.0, vx: float = 0.0) -> np.ndarray:
+              reference_gap: float = 0.0, vx: float = 0.0, beta_floor: float = 0.0) -> np.ndarray:
         """The published std: each state's by its channels' consistency, the yaw rate's also by its gyro's noise as
         measured over configured (``gyro_noise``, :mod:`canest.estimation.measured_noise`; never narrowed by it), vx
         with its lateral drift (``lateral``, :meth:`lateral_std`) and the reference speed's random walk, the error every
@@ -163,7 +163,8 @@ class StateJudge:
         ``reference_gap`` (its distance from the reference beyond the reference's std, ``ReferenceSpeed.disagreement``),
         a leaky maximum fading over ``validity.HOLD`` s (it alternates tick by tick while vx and the reference cross:
         vx's bit flickered between valid and uncertain); sideslip with its model error (``beta_model_std``,
-        :meth:`sideslip_model_std`), and never below its last mismatch with the kinematic sideslip change. vx (its
+        :meth:`sideslip_model_std`), and never below ``beta_floor`` (the model error of a model whose covariance
+        holds it as a relaxing noise only) nor its last mismatch with the kinematic sideslip change. vx (its
         value ``vx``) and the yaw rate add the error of the wheel-speed scale and the gyro bias in quadrature
         (:meth:`use_correction_std`: the config's claim, or the applied correction's)."""
         std = std.copy()
@@ -175,7 +176,7 @@ class StateJudge:
                      self.reference_gap.update(reference_gap))
         std[index["vx"]] = math.hypot(vx_std, abs(vx) * speed_std) if speed_std else vx_std
         std[index["beta"]] = max(math.hypot(std[index["beta"]] * validity.inflation(ratios["beta"]), beta_model_std),
-                                 self.kinematic.mismatch)
+                                 beta_floor, self.kinematic.mismatch)
         return std
 
     def causes(self, inputs, ratios: dict, vx_std: float, lateral: dict, t: float, drift: float = 0.0,
