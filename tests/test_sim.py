@@ -94,3 +94,24 @@ def test_accelerometers_on_the_body_read_its_roll_and_pitch_as_gravity(config):
     rolling = dataclasses.replace(config, vehicle=dataclasses.replace(config.vehicle, accelerometer_roll_gradient=4.0))
     assert [f.data for f in simulate(rolling, "step", 60.0, 0.85, duration=2.0, noise_scale=0.0).frames] != \
         [f.data for f in level.frames]  # the config's tilt, when the car does not say otherwise
+
+
+def test_a_road_grade_slows_the_car_by_gravity_that_its_accelerometer_reads(config):
+    """Uphill at 6 % the accelerometer, reading the tires' force, shows ``g sin(grade)`` more than the speed's change
+    (straight ahead: no ``r vy``); the speed controller then holds the speed with the force gravity's pull needs."""
+    grade = math.atan(0.06)
+    truth = simulate(config, "step", 80.0, 0.85, duration=6.0, amplitude_deg=0.0,
+                     mismatch=PlantMismatch(grade=grade)).truth
+    unseen = truth["ax"] - np.gradient(truth["vx"], truth["t"])
+    assert unseen[5:-5] == pytest.approx(GRAVITY * math.sin(grade), abs=0.01)
+    assert truth["vx"][-1] == pytest.approx(80.0 / 3.6, abs=0.3)
+
+
+def test_the_grade_option_is_checked():
+    from canest.commands.simulate import parse_mismatch
+    from canest.cli import build_parser
+    args = build_parser().parse_args(["simulate", "--out", "x.log", "--truth", "x.csv", "--grade", "40"])
+    with pytest.raises(ValueError, match="--grade: percent from -30 to 30, got 40"):
+        parse_mismatch(args)
+    args.grade = 6.0
+    assert parse_mismatch(args).grade == pytest.approx(math.atan(0.06))

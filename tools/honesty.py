@@ -6,6 +6,7 @@
     python tools/honesty.py --filters all --seeds 3 --json > honesty.json
     python tools/honesty.py --filters ckf,jckf --vibration 1     # the IMU vibrating as on a real car
     python tools/honesty.py --filters all --seeds 3 --car drawn   # each seed a car as wrong as its config admits
+    python tools/honesty.py --filters all --grade 6               # uphill at 6 %
 
 For every case of maneuvers x speeds x frictions x noise seeds it simulates
 one drive (cached in ``--workdir``: tools/drive_cache.py), replays it with every filter (each on
@@ -53,16 +54,19 @@ class Case:
     duration: float | None = None  # s; None: the maneuver's own
     vibration: float = 0.0  # scale of the IMU's body vibration and road spikes (canest.sim.sensors; 0 none)
     car: str = "exact"  # "exact": the config's car; "drawn": per seed, one as wrong as the config admits
+    grade: float = 0.0  # road grade, % (positive uphill)
 
     def mismatch(self, config) -> PlantMismatch:
-        return (drawn_mismatch(config.vehicle, self.seed, config.estimator.gyro_bias_std) if self.car == "drawn"
-                else PlantMismatch())
+        car = (drawn_mismatch(config.vehicle, self.seed, config.estimator.gyro_bias_std) if self.car == "drawn"
+               else PlantMismatch())
+        return dataclasses.replace(car, grade=math.atan(self.grade / 100.0))
 
     @property
     def key(self) -> str:
         length = f"-{self.duration:g}s" if self.duration else ""
         car = "" if self.car == "exact" else f"-{self.car}"
-        return f"{self.maneuver}-{self.speed:g}kmh-mu{self.mu:g}-s{self.seed}{length}-vib{self.vibration:g}{car}"
+        grade = f"-grade{self.grade:g}" if self.grade else ""
+        return f"{self.maneuver}-{self.speed:g}kmh-mu{self.mu:g}-s{self.seed}{length}-vib{self.vibration:g}{car}{grade}"
 
 
 def drive(config, case: Case, workdir: Path):
@@ -146,7 +150,8 @@ def _pct(share: float) -> str:
 
 def cases_of(args) -> list:
     split = (lambda text: [p.strip() for p in str(text).split(",") if p.strip()])
-    return [Case(m, float(v), float(mu), seed, args.duration, args.vibration, args.car) for m in split(args.maneuvers)
+    return [Case(m, float(v), float(mu), seed, args.duration, args.vibration, args.car, args.grade)
+            for m in split(args.maneuvers)
             for v in split(args.speed) for mu in split(args.mu) for seed in range(args.seeds)]
 
 
@@ -167,6 +172,8 @@ def parse_args(argv=None):
                         "the config admits (cornering stiffnesses off by its cornering_stiffness_uncertainty, "
                         "accelerometer and gyro biases, the gyro's also by estimator.gyro_bias_std, the wheel radius by "
                         "wheel_radius_uncertainty: canest.sim.mismatch.drawn_mismatch)")
+    p.add_argument("--grade", type=float, default=0.0, metavar="PCT",
+                   help="road grade in %%, positive uphill (default 0: flat)")
     p.add_argument("--config", default=str(DEFAULT_CONFIG), help="vehicle config (default: the built-in one)")
     p.add_argument("--workdir", default="honesty-work", help="cache of simulated drives, per config and simulator source (default ./honesty-work)")
     p.add_argument("--jobs", type=int, default=1, help="cases in parallel processes (default 1)")

@@ -79,6 +79,9 @@ def register(subparsers) -> None:
                      help="lateral accelerometer bias in m/s^2 (default -0.03)")
     car.add_argument("--bank", type=float, default=0.0, metavar="DEG",
                      help="road bank in deg, positive when the road falls to the left (default 0)")
+    car.add_argument("--grade", type=float, default=0.0, metavar="PCT",
+                     help="road grade in %% (rise per 100 m run), positive uphill (default 0; a motorway's steepest "
+                          "is 4-6, a mountain road's 10-15)")
     car.add_argument("--roll-gradient", type=float, metavar="DEG/G",
                      help="body roll per g of lateral acceleration, read by the accelerometers fixed to the body "
                           "(a passenger car: 3-6; 0: the ESC publishes ay level; default the config's "
@@ -117,6 +120,7 @@ def parse_mu_jump(text):
 
 SCALE_RANGE = (0.3, 3.0)  # a car's stiffness, ratio or radius off by more is another car
 MAX_BANK_DEG = 15.0
+MAX_GRADE_PCT = 30.0  # steeper is a ramp, not a road
 
 
 def parse_mismatch(args) -> PlantMismatch:
@@ -134,6 +138,8 @@ def parse_mismatch(args) -> PlantMismatch:
             raise UsageError(f"{option}: a factor from {low:g} to {high:g}, got {', '.join(map(str, values))}")
     if not abs(args.bank) <= MAX_BANK_DEG:
         raise UsageError(f"--bank: degrees from -{MAX_BANK_DEG:g} to {MAX_BANK_DEG:g}, got {args.bank}")
+    if not abs(args.grade) <= MAX_GRADE_PCT:
+        raise UsageError(f"--grade: percent from -{MAX_GRADE_PCT:g} to {MAX_GRADE_PCT:g}, got {args.grade}")
     for axis in ("roll", "pitch"):
         value = getattr(args, f"{axis}_gradient")
         problem = None if value is None else limits.ATTITUDE[f"accelerometer_{axis}_gradient"].violation(value)
@@ -142,7 +148,7 @@ def parse_mismatch(args) -> PlantMismatch:
     radians = lambda value: None if value is None else math.radians(value)  # noqa: E731
     return PlantMismatch(scales[0], scales[1], args.steering_ratio_scale, args.wheel_radius_scale,
                          radians(args.steering_offset), radians(args.gyro_bias), args.ay_bias, math.radians(args.bank),
-                         args.roll_gradient, args.pitch_gradient)
+                         args.roll_gradient, args.pitch_gradient, math.atan(args.grade / 100.0))
 
 
 def run(args) -> int:

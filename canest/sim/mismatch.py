@@ -8,7 +8,8 @@ gyro, lateral accelerometer) in place of the defaults of
 :mod:`canest.sim.sensors`, and a road bank: a constant tilt of the road about
 the car's x axis, positive when the road falls to the left, so that gravity
 pulls the car to the left with ``g sin(bank)`` (which the accelerometer, measuring
-the tires' force, does not see), and the body's roll and pitch gradients its accelerometers read
+the tires' force, does not see), a road grade (positive uphill: gravity slows the car by ``g sin(grade)``,
+which the accelerometer does not see either), and the body's roll and pitch gradients its accelerometers read
 (:mod:`canest.models.attitude`; deg/g, None: the config's). :func:`true_vehicle` gives the parameters of the
 car the plant drives, as a config would state them were it right, :func:`true_fit` the
 calibration that would be exact. :func:`drawn_mismatch` draws a car as wrong as its config admits, the
@@ -47,6 +48,7 @@ class PlantMismatch:
     bank: float = 0.0  # rad
     roll_gradient: float | None = None  # deg/g the accelerometers read; None: the config's
     pitch_gradient: float | None = None  # deg/g
+    grade: float = 0.0  # rad, positive uphill
 
     def tire(self, tire: TireParams = TireParams()) -> TireParams:
         """The plant's tire with the lateral stiffnesses scaled."""
@@ -72,6 +74,11 @@ class PlantMismatch:
     def bank_acceleration(self) -> float:
         """Gravity's component along the car's y axis, m/s^2."""
         return GRAVITY * math.sin(self.bank)
+
+    @property
+    def grade_acceleration(self) -> float:
+        """Gravity's component along the car's x axis, m/s^2 (negative uphill)."""
+        return -GRAVITY * math.sin(self.grade)
 
 
 DRAWN_AY_BIAS = 0.1  # m/s^2, std: a production ESC accelerometer's residual offset plus a road's crown (2 % is 0.2)

@@ -16,7 +16,9 @@ Tire forces from :mod:`canest.sim.tire`; lateral forces follow the steady
 state with relaxation ``dFy/dt = |v_long| / sigma (Fy_ss - Fy)`` (paper eq 6).
 Chassis: ``m (dvx/dt - r vy) = sum Fx_b - drag``, ``m (dvy/dt + r vx) = sum Fy_b``,
 ``Iz dr/dt = sum (x_i Fy_b,i - y_i Fx_b,i)``; a banked road adds gravity's
-``bank_acceleration`` (m/s^2) to dvy/dt, which the measured ay (the tires' force) does not see;
+``bank_acceleration`` (m/s^2) to dvy/dt, which the measured ay (the tires' force) does not see, a road's
+grade its ``grade_acceleration`` to dvx/dt, unseen by the measured ax alike (its load transfer is the tires'
+force's, as the accelerometer's);
 wheels: ``J dw/dt = T - R Fx - R f_rr Fz``.
 """
 from __future__ import annotations
@@ -55,10 +57,12 @@ class PlantOutputs:
 
 
 class TwoTrackPlant:
-    def __init__(self, vehicle: VehicleParams, mu, tire: TireParams = TireParams(), bank_acceleration: float = 0.0):
+    def __init__(self, vehicle: VehicleParams, mu, tire: TireParams = TireParams(), bank_acceleration: float = 0.0,
+                 grade_acceleration: float = 0.0):
         self.p = vehicle
         self.tire = tire
         self.bank_acceleration = bank_acceleration
+        self.grade_acceleration = grade_acceleration
         self.mu = np.broadcast_to(np.asarray(mu, dtype=float), (4,)).copy()
         self.wheels = WheelGeometry(vehicle)
         self.pos_x, self.pos_y = self.wheels.pos_x, self.wheels.pos_y
@@ -95,7 +99,7 @@ class TwoTrackPlant:
         d[X] = s[VX] * cos_psi - s[VY] * sin_psi
         d[Y] = s[VX] * sin_psi + s[VY] * cos_psi
         d[PSI] = s[R]
-        d[VX] = ax + s[R] * s[VY]
+        d[VX] = ax + s[R] * s[VY] + self.grade_acceleration
         d[VY] = ay - s[R] * s[VX] + self.bank_acceleration
         d[R] = (self.pos_x @ fy_b - self.pos_y @ fx_b) / p.yaw_inertia
         rolling = self.tire.rolling_resistance * fz * np.tanh(s[W] / 0.5)

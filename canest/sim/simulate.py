@@ -82,7 +82,7 @@ def simulate(config: Config, maneuver: str, speed_kmh: float, mu, *, duration=No
     speed = speed_kmh / 3.6
     plan = make_maneuver(maneuver, speed, amplitude_deg, duration, seed)
     vehicle = true_vehicle(config.vehicle, mismatch)
-    plant = TwoTrackPlant(vehicle, mu, mismatch.tire(), mismatch.bank_acceleration)
+    plant = TwoTrackPlant(vehicle, mu, mismatch.tire(), mismatch.bank_acceleration, mismatch.grade_acceleration)
     tilt = (per_si(vehicle.accelerometer_pitch_gradient), per_si(vehicle.accelerometer_roll_gradient))
     driver = Driver(vehicle, plan, speed)
     sensors = SensorModel(rng, noise_scale, outliers, mismatch.sensor_errors(), vibration=vibration)
