@@ -274,7 +274,7 @@ class Estimator:
         delta = self._road_wheel_angle(inputs)
         front_excess = vx * (math.cos(delta) - 1.0) + (vy + self.vehicle.cg_to_front * yaw_rate) * math.sin(delta)
         return self.reference_speed.update(t, acceleration, speeds, accelerations, usage, front_excess,
-                                           self.ax_noise.density or 0.0, inputs.has(*TORQUES))
+                                           self.ax_noise.density, inputs.has(*TORQUES), vx * yaw_rate)
 
     def _derived(self, inputs: TickInputs, t: float, lateral_ok: bool) -> dict:
         """Channels computed from the inputs this tick: name -> (value, standard deviation, age).

@@ -50,5 +50,8 @@ def parameters(vehicle: VehicleParams, gyro_bias_std: float = 0.0) -> tuple:
 
 NAMES = ("speed", "gyro_bias", "ay_bias", "steering_offset", "ratio", "understeer", "ax_bias", "front", "rear")
 SPEED, GYRO, AY, OFFSET, RATIO, UNDERSTEER, AX, FRONT, REAR = range(len(NAMES))
-APPLIED = (SPEED, GYRO, RATIO, AX, FRONT, REAR)  # the steering and lateral offsets are not: a bank shows as both
+# the steering and lateral offsets are not applied: a bank shows as both; nor ax's: a road's grade moves it faster
+# than a calibration may follow, and the reference speed learns it from the wheels within a second
+# (:mod:`canest.estimation.longitudinal_offset`)
+APPLIED = (SPEED, GYRO, RATIO, FRONT, REAR)
 STIFFNESS = (FRONT, REAR)  # factors on the configured cornering stiffnesses, learned by the window fit

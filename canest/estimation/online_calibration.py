@@ -38,8 +38,11 @@ learned one, by at most ``rate`` per second, once ``APPLY_EVIDENCE`` s of blocks
 excited it: the learned mean is the best estimate the drive gives (the prior
 shrinks it), so it is applied before it is certain (:meth:`_follow`); the gyro
 bias waits for convergence. The correction acts on the inputs, so every model
-gains from it: wheel speeds times ``speed``, yaw rate less ``gyro_bias``, ax
-less ``ax_bias``, steering angle over ``ratio``. ``understeer`` is learned and
+gains from it: wheel speeds times ``speed``, yaw rate less ``gyro_bias``,
+steering angle over ``ratio``. ``ax_bias`` is learned and reported, not applied:
+it holds the road's grade, which changes faster than a calibration may follow;
+the reference speed learns ax's offset from the wheels within a second
+(:mod:`canest.estimation.longitudinal_offset`). ``understeer`` is learned and
 reported but not applied: it fixes only the balance of the two cornering
 stiffnesses. Nor are the steering offset and the lateral offset ``ay_bias``
 applied: a road's bank shows as both, and applied as offsets its side force
@@ -457,8 +460,6 @@ class OnlineCalibration:
         for wheel in self.blocks.wheels:
             values[wheel] *= a[SPEED]
         values[index["yaw_rate"]] -= a[GYRO]
-        if self.blocks.ax is not None:
-            values[self.blocks.ax] -= a[AX]
         swa = index["steering_wheel_angle"]
         values[swa] = float(identities.road_wheel_angle(values[swa], 0.0, a[RATIO]))
         return replace(sample, values=values)

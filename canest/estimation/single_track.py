@@ -2,7 +2,10 @@
 
 Measurements ay, yaw rate and the wheel-speed mean ``vx_wheel``; input
 ``u = (road wheel angle, ax, cornering stiffness scale 1)`` (a dual filter
-replaces the scale with its own estimate).
+replaces the scale with its own estimate), ax less its offset from the
+wheels' acceleration (a road's grade: :mod:`canest.estimation.longitudinal_offset`):
+the model's ax is ``dvx/dt - r vy`` (eq 3), the accelerometer's holds gravity's pull
+down a hill.
 """
 from __future__ import annotations
 
@@ -19,7 +22,7 @@ class SingleTrackEstimator(Estimator):
         super().__init__(config, SingleTrackModel(config.vehicle))
 
     def _control(self, inputs: TickInputs, t: float) -> np.ndarray:
-        return np.array([self._road_wheel_angle(inputs), inputs.current("ax"), 1.0])
+        return np.array([self._road_wheel_angle(inputs), inputs.current("ax") - self.reference_speed.offset.value, 1.0])
 
     def _update(self, channels: ch.Channels, inputs: TickInputs, u: np.ndarray, lateral_ok: bool, t: float) -> bool:
         """A dual filter learns its stiffness scale only with the lateral channels in use and the accelerometers'
