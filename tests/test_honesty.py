@@ -205,8 +205,8 @@ def test_the_lateral_forces_std_is_the_tire_curves_error_not_a_random_walks(tmp_
     with its stiffnesses off). It is now the stiffness uncertainty's share of each force, moving an axle's two
     wheels together, over a 300 N/sqrt(s) floor. The sideslip's covariance holds that error too, as a relaxing
     noise: the stiffness term of the other models added on top of it doubled it (NEES 0.35 on this drive, 1.26
-    once); it is the std's floor instead (0.40: wider than this car's error, a stiffness within 13 % of the config's,
-    needs; the next test shows why it must be there)."""
+    counted once). It is the std's floor instead: NEES 0.40 here, where the car's stiffnesses are within 13 % of the
+    config's and the floor is wider than their error; the next test shows why the floor must be there."""
     case = honesty.Case("sine", 80.0, 0.85, 2, car="drawn")
     result = honesty.run_case(CONFIG, ["dici-gfckf"], case, tmp_path)
     scores = [honesty.summarize(f"fy_{wheel}", result["sums"]["dici-gfckf"][f"fy_{wheel}"])
@@ -214,7 +214,7 @@ def test_the_lateral_forces_std_is_the_tire_curves_error_not_a_random_walks(tmp_
     assert all(score.valid > 0.3 and score.vbw == 0.0 for score in scores), scores
     assert 0.4 <= sum(score.nees for score in scores) / len(scores) <= 2.0, scores
     sideslip = honesty.summarize("beta", result["sums"]["dici-gfckf"]["beta"])
-    assert sideslip.valid > 0.3 and sideslip.vbw == 0.0 and 0.3 <= sideslip.nees <= 2.0, sideslip
+    assert sideslip.valid > 0.3 and sideslip.vbw == 0.0 and 0.38 <= sideslip.nees <= 2.0, sideslip
 
 
 def test_the_tire_force_sideslip_std_is_never_below_a_stiffness_error_held_steadily(tmp_path):
@@ -306,8 +306,8 @@ def test_a_sideslip_resting_on_a_saturation_the_car_has_not_shown_carries_it_in_
 def test_vx_on_a_hill_is_right_within_its_std(tmp_path):
     """Uphill at 6 % the accelerometer reads 0.59 m/s^2 of gravity that the speed does not follow. The reference
     speed compared the wheels' acceleration with ax itself, so no wheel was ever in step, and it integrated ax for
-    the whole climb: on this road ckf's vx ran up to 3.6 m/s off with a std of 0.08, valid but wrong on 61 % of its
-    valid ticks (jckf 3 %, dici-gfckf 57 %). The wheels now measure ax's offset while they roll freely
+    the whole climb: on 40 s of this road ckf's vx ran up to 3.6 m/s off with a std of 0.08, valid but wrong on 61 %
+    of its valid ticks (jckf 3 %, dici-gfckf 57 %; over these 30 s ckf was valid on 81 % of the ticks). The wheels now measure ax's offset while they roll freely
     (``canest.estimation.longitudinal_offset``), the reference and the single-track model take ax less it."""
     case = honesty.Case("country", 80.0, 0.85, 3, duration=30.0, grade=6.0)
     result = honesty.run_case(CONFIG, ["ckf", "dici-gfckf"], case, tmp_path)
@@ -324,3 +324,14 @@ def test_a_launch_uphill_integrates_ax_less_the_grade_the_wheels_measured_before
     result = honesty.run_case(CONFIG, ["ckf"], case, tmp_path)
     score = honesty.summarize("vx", result["sums"]["ckf"]["vx"])
     assert score.valid > 0.9 and score.vbw == 0.0 and score.rmse < 0.1, score
+
+
+def test_a_car_without_motor_torques_on_a_hill_integrates_ax_less_the_grade(tmp_path):
+    """The tire-force model without torques takes its longitudinal forces, and so vx, from ax: uphill at 6 % on
+    30 s of this road its vx was 2.4 m/s off in RMS, valid but wrong on 43 % of its valid ticks
+    (``configs/hard_drive.yaml``). With the reference speed taking the grade out and the model not, its vx lagged
+    gravity's pull between anchors: 0.037 m/s in RMS on these 20 s. It takes ax less the wheels' offset too: 0.017."""
+    case = honesty.Case("country", 80.0, 1.0, 3, duration=20.0, grade=6.0)
+    result = honesty.run_case(ROOT / "configs" / "hard_drive.yaml", ["ckf"], case, tmp_path)
+    score = honesty.summarize("vx", result["sums"]["ckf"]["vx"])
+    assert score.valid > 0.9 and score.vbw == 0.0 and score.rmse < 0.025, score

@@ -42,7 +42,7 @@ def parameters(vehicle: VehicleParams, gyro_bias_std: float = 0.0) -> tuple:
         Learned("steering_offset", 0.0, 2.0 * deg, *BOUNDS["steering_offset"], 0.05 * deg, 0.2 * deg, 1.0 * deg),
         Learned("ratio", 1.0, 0.1, *BOUNDS["ratio"], 0.002, 0.03, 0.025),
         Learned("understeer", vehicle.understeer_gradient, 0.003, -0.01, 0.02, 0.0001, 0.0005, 0.0),
-        Learned("ax_bias", 0.0, 0.3, -2.0, 2.0, 0.01, 0.03, 0.1),
+        Learned("ax_bias", 0.0, 0.3, -2.0, 2.0, 0.01, 0.03, 0.0),  # reported, not applied: no rate
         Learned("front", 1.0, stiffness_std, 0.5, 2.0, 0.02, 0.05, 0.05),
         Learned("rear", 1.0, stiffness_std, 0.5, 2.0, 0.02, 0.05, 0.05),
     )

@@ -10,12 +10,13 @@ longitudinal acceleration in between:
   (``|Fx| / Fz < FREE_ROLLING_USAGE``; a tire needs slip to transmit force,
   and on ice (mu 0.1) half its friction already takes ~2 % slip) and its
   circumferential acceleration ``R dw/dt`` (a slope over the last ``WINDOW``
-  samples) agrees with ax's mean over the same samples within
+  samples) agrees with ax less its offset (a road's grade:
+  :mod:`canest.estimation.longitudinal_offset`), ax's mean over the same
+  samples where motor torques give the usage, within
   ``WHEEL_ACCELERATION_TOLERANCE`` and, in quadrature, ``IN_STEP_STDS``
   standard deviations of that mean's noise (``sqrt(q / T)``, ``q`` ax's
-  measured density, ``T`` the window's samples times their period), ax less
-  its offset (a road's grade: :mod:`canest.estimation.longitudinal_offset`):
-  a wheel spinning up or locking does not. Against the raw ax sample, an IMU vibrating
+  measured density, ``T`` the window's samples times their period): a wheel
+  spinning up or locking does not. Against the raw ax sample, an IMU vibrating
   as the simulator's ``vibration 1`` (1.4 m/s^2) let the wheels anchor the
   speed on 30 of the 1300 ticks of the 80 km/h sine (the reference integrated
   ax for up to 2.2 s); against the window's mean, on 476 (vibrating honesty
