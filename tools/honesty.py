@@ -36,7 +36,7 @@ from canest.apps.evaluate import DISPLAY, counts, pool, read_table, summarize  #
 from canest.apps.replay import replay  # noqa: E402
 from canest.config import DEFAULT_CONFIG, load_config  # noqa: E402
 from canest.errors import CanestError, SimulationError  # noqa: E402
-from canest.sim.mismatch import PlantMismatch, drawn_mismatch  # noqa: E402
+from canest.sim.mismatch import PlantMismatch, drawn_mismatch, grade_angle  # noqa: E402
 from canest.sim.simulate import simulate  # noqa: E402
 from drive_cache import folder  # noqa: E402  (tools/, beside this file)
 
@@ -59,7 +59,7 @@ class Case:
     def mismatch(self, config) -> PlantMismatch:
         car = (drawn_mismatch(config.vehicle, self.seed, config.estimator.gyro_bias_std) if self.car == "drawn"
                else PlantMismatch())
-        return dataclasses.replace(car, grade=math.atan(self.grade / 100.0))
+        return dataclasses.replace(car, grade=grade_angle(self.grade))
 
     @property
     def key(self) -> str:

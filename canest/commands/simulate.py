@@ -13,7 +13,7 @@ from canest.commands.common import FORMATTER, add_config, config_from_args
 from canest.io.outputs import OutputFile, check_outputs, is_stdio
 from canest.io.sinks import open_frame_writer
 from canest.sim.maneuvers import MANEUVERS
-from canest.sim.mismatch import PlantMismatch
+from canest.sim.mismatch import PlantMismatch, grade_angle
 from canest.sim.simulate import simulate
 
 EPILOG = """examples:
@@ -148,7 +148,7 @@ def parse_mismatch(args) -> PlantMismatch:
     radians = lambda value: None if value is None else math.radians(value)  # noqa: E731
     return PlantMismatch(scales[0], scales[1], args.steering_ratio_scale, args.wheel_radius_scale,
                          radians(args.steering_offset), radians(args.gyro_bias), args.ay_bias, math.radians(args.bank),
-                         args.roll_gradient, args.pitch_gradient, math.atan(args.grade / 100.0))
+                         args.roll_gradient, args.pitch_gradient, grade_angle(args.grade))
 
 
 def run(args) -> int:

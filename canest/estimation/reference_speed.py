@@ -149,13 +149,13 @@ class ReferenceSpeed:
         """
         radius = self.wheel_radius
         self.ax_density = ax_density or 0.0
-        mean, noise = self._window_acceleration(t, acceleration)
+        measured, tolerance = self._window_acceleration(t, acceleration)
+        if not usage_measured:
+            measured, tolerance = acceleration, WHEEL_ACCELERATION_TOLERANCE
+        measured -= self.offset.value
         # the wheels' slopes span samples from before a gap until the window has refilled: none is in step then
         refilled = len(self.recent) == WINDOW
-        wheels = [radius * a for a in wheel_accelerations]
-        measured, tolerance = (mean, math.hypot(WHEEL_ACCELERATION_TOLERANCE, IN_STEP_STDS * noise)) \
-            if usage_measured else (acceleration, WHEEL_ACCELERATION_TOLERANCE)
-        in_step = [refilled and abs(wheel - (measured - self.offset.value)) < tolerance for wheel in wheels]
+        in_step = [refilled and abs(radius * a - measured) < tolerance for a in wheel_accelerations]
         free = [step and abs(x) < FREE_ROLLING_USAGE for step, x in zip(in_step, usage)]
         self.offset.update(t, acceleration, [radius * w for w in wheel_speeds], usage, FREE_ROLLING_USAGE, ax_density,
                            turning)
@@ -190,16 +190,16 @@ class ReferenceSpeed:
 
     def _window_acceleration(self, t: float, acceleration: float) -> tuple[float, float]:
         """The acceleration's mean over the wheel accelerations' window (their Theil-Sen slopes span the same
-        ``WINDOW`` samples) and the std of that mean's noise, ``sqrt(q / T)``, ``T`` its samples times their period
-        (0 over fewer than two samples)."""
+        ``WINDOW`` samples) and how far a wheel in step may differ from it: ``WHEEL_ACCELERATION_TOLERANCE`` and, in
+        quadrature, ``IN_STEP_STDS`` std of the mean's noise, ``sqrt(q / T)``, ``T`` its samples times their period."""
         if self.recent and not 0.0 < t - self.recent[-1][0] <= MAX_GAP:
             self.recent.clear()
         self.recent.append((t, acceleration))
         mean = sum(a for _, a in self.recent) / len(self.recent)
         if len(self.recent) < 2:
-            return mean, 0.0
+            return mean, WHEEL_ACCELERATION_TOLERANCE
         span = (t - self.recent[0][0]) * len(self.recent) / (len(self.recent) - 1)
-        return mean, math.sqrt(self.ax_density / span)
+        return mean, math.hypot(WHEEL_ACCELERATION_TOLERANCE, IN_STEP_STDS * math.sqrt(self.ax_density / span))
 
     def _undriven_pair(self, t: float, acceleration: float, wheel_speeds, usage, in_step, front_excess: float) -> None:
         """Anchor on the pair of an undriven axle (``vehicle.drive``) that spins with ax and has transmitted no

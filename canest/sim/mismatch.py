@@ -81,6 +81,11 @@ class PlantMismatch:
         return -GRAVITY * math.sin(self.grade)
 
 
+def grade_angle(percent: float) -> float:
+    """A road's grade in percent (rise per 100 m run, positive uphill) as :attr:`PlantMismatch.grade` (rad)."""
+    return math.atan(percent / 100.0)
+
+
 DRAWN_AY_BIAS = 0.1  # m/s^2, std: a production ESC accelerometer's residual offset plus a road's crown (2 % is 0.2)
 DRAWN_GYRO_BIAS = math.radians(0.05)  # rad/s, std: what the built-in config's gyro noise (0.11 deg/s) leaves for bias
 STIFFNESS_SCALE_LIMITS = (0.5, 1.5)
