@@ -304,6 +304,20 @@ def test_while_the_wheels_are_missing_ax_carries_the_speed_and_spinning_wheels_a
     assert fresh.speed is None
 
 
+def test_a_gated_span_after_a_bend_does_not_count_with_one_before_it():
+    """Relearning needs RELEARN s of gated spans on end: two outliers either side of a bend are not a new grade."""
+    ref, t0 = rolled(3.0)
+    learned = ref.offset.measured_std
+    for k in range(1, 61):  # 0.6 s: ax jumps by 1 m/s^2 (a pothole's outlier spans once the span is full)
+        ref.update(t0 + k * 0.01, 1.0, np.full(4, 50.0), ROLLING, ROLLING)
+    for k in range(61, 261):  # a 2 s bend: nothing learned, nothing gated
+        ref.update(t0 + k * 0.01, 0.0, np.full(4, 50.0), ROLLING, ROLLING, turning=3.0)
+    for k in range(261, 321):  # straight again, the same outlier for 0.6 s
+        ref.update(t0 + k * 0.01, 1.0, np.full(4, 50.0), ROLLING, ROLLING)
+    assert ref.offset.measured_std == pytest.approx(learned, rel=0.5)  # not back at the prior
+    assert ref.offset.value == pytest.approx(0.0, abs=0.05)
+
+
 def test_wheels_back_after_a_gap_anchor_only_once_their_slopes_span_samples_since_it():
     """A wheel slope over samples from before the gap says nothing of the wheels now: wheels back 10 rad/s faster,
     their slopes still those of free rolling, anchored the speed 3.5 m/s high with the anchored std."""

@@ -80,6 +80,7 @@ class LongitudinalOffset:
         self.last_t = t
         if abs(turning) >= STRAIGHT or any(abs(x) >= free_usage for x in usage) or not 0.0 < dt <= GAP:
             self.span.clear()
+            self.rejected_since = None  # gated spans must follow on end: one after a bend is not a new grade
         self.span.append((t, self.integral, list(wheel_speeds), list(usage)))
         while len(self.span) > 1 and t - self.span[1][0] >= SETTLE:
             self.span.popleft()
