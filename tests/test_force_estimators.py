@@ -181,7 +181,7 @@ def test_a_tires_stiffness_sensitivity_is_its_force_in_the_linear_range_and_zero
 
     model = TwoTrackModel(config.vehicle, config.vehicle.tire)
     vx, radius = 20.0, config.vehicle.wheel_radius
-    u = np.array([0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0])
+    u = np.zeros(8)
     small_slip = np.array([0.0, 0.002, vx, *[vx / radius] * 4, *[0.9] * 4])  # 0.1 deg of sideslip
     fx, fy, _, _ = model.forces(small_slip[None, :], u)
     assert model.stiffness_sensitivity(small_slip, u) == pytest.approx(np.hypot(fx, fy)[0], rel=0.02)

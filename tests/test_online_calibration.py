@@ -554,9 +554,9 @@ def test_at_a_tick_rate_that_is_not_a_multiple_of_50_hz_the_stiffnesses_are_not_
 
 MODELS = {  # each model class with its u (its binding's docstring)
     "single_track": (SingleTrackModel, [0.05, 0.5, 1.0]),
-    "tire_force": (TireForceModel, [0.05, 0.5, 2.0, 80.0, 80.0, 60.0, 60.0]),
-    "tire_force from ax": (AxDrivenTireForceModel, [0.05, 0.5, 2.0]),
-    "two_track": (TwoTrackModel, [0.05, 0.5, 2.0, 40.0, 40.0, 30.0, 30.0])}
+    "tire_force": (TireForceModel, [0.05, 0.5, 2.0, 0.1, 80.0, 80.0, 60.0, 60.0]),
+    "tire_force from ax": (AxDrivenTireForceModel, [0.05, 0.5, 2.0, 0.1]),
+    "two_track": (TwoTrackModel, [0.05, 0.5, 2.0, 0.1, 40.0, 40.0, 30.0, 30.0])}
 BASE_STATE = {"vx": 20.0, "w_": 20.0 / 0.33, "mu_": 0.9}
 
 

@@ -4,7 +4,7 @@ import pytest
 
 from canest.models import tire_force, two_track
 from canest.models.tire import TireModelParams, cornering_stiffness, magic_formula, magic_formula_slope
-from canest.models.tire_force import TireForceModel
+from canest.models.tire_force import AxDrivenTireForceModel, TireForceModel
 from canest.models.two_track import TwoTrackModel
 from canest.models.wheel_force import WheelAcceleration, longitudinal_forces
 from canest.models.wheels import GRAVITY, WheelGeometry
@@ -101,7 +101,7 @@ def left_turn(model, X, u, seconds=3.0):
 
 def test_tire_force_model_left_turn_signs_and_relaxation(config):
     model = TireForceModel(config.vehicle)
-    u = np.array([0.03, 0.0, 3.0, 0.0, 0.0, 0.0, 0.0])
+    u = np.array([0.03, 0.0, 3.0, 0.0, 0.0, 0.0, 0.0, 0.0])
     X = left_turn(model, np.array([[0.0, 0.0, 20.0, 0.0, 0.0, 0.0, 0.0]]), u)
     z = model.measure(X, u)
     assert X[0, tire_force.YAW] > 0 and z[0, 1] > 0  # positive yaw rate and lateral acceleration
@@ -117,7 +117,7 @@ def test_two_track_model_left_turn_drive_and_stiff_wheels(config):
     model = TwoTrackModel(config.vehicle)
     R = config.vehicle.wheel_radius
     x0 = np.array([[0.0, 0.0, 20.0, *[20.0 / R] * 4, *[0.9] * 4]])
-    u = np.array([0.03, 0.0, 3.0, 200.0, 200.0, 200.0, 200.0])
+    u = np.array([0.03, 0.0, 3.0, 0.0, 200.0, 200.0, 200.0, 200.0])
     X = left_turn(model, x0, u)
     z = model.measure(X, u)
     assert np.all(np.isfinite(X))
@@ -125,9 +125,31 @@ def test_two_track_model_left_turn_drive_and_stiff_wheels(config):
     assert np.all(X[0, two_track.W] * R > X[0, two_track.VX])  # driving torque: positive slip
     np.testing.assert_allclose(X[0, two_track.MU], 0.9)  # friction is a parameter: unchanged by the transition
     sensitivity = model.friction_sensitivity(X[0], u)
-    straight = model.friction_sensitivity(x0[0], np.array([0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]))
+    straight = model.friction_sensitivity(x0[0], np.zeros(8))
     assert np.all(sensitivity > straight)
     np.testing.assert_allclose(model.friction_sensitivity(np.stack([X[0], x0[0]]), u)[0], sensitivity)  # batched
+
+
+@pytest.mark.parametrize("model_class", [TireForceModel, AxDrivenTireForceModel, TwoTrackModel])
+def test_a_grades_gravity_slows_a_force_driven_models_vx_beside_its_forces(config, model_class):
+    """The offset of ax the wheels show (g sin(grade) uphill) is not a tire force: the accelerometer reads the
+    forces, gravity slows the car beside them. Forces, yaw and sideslip are left as on the flat road."""
+    model = model_class(config.vehicle)
+    R = config.vehicle.wheel_radius
+    frictions = [0.9] * 4 if model_class is TwoTrackModel else []
+    wheels = [20.0 / R] * 4 if model_class is TwoTrackModel else [0.0] * 4
+    X = np.array([[0.05, 0.01, 20.0, *wheels, *frictions]])
+    torques = [] if model_class is AxDrivenTireForceModel else [150.0] * 4
+    flat, uphill = (np.array([0.02, 0.4, 1.0, offset, *torques]) for offset in (0.0, GRAVITY * np.sin(0.06)))
+    dt = 0.01
+    slowed = model.transition(X, flat, dt)[0] - model.transition(X, uphill, dt)[0]
+    feedback = 0.05 if model_class is TwoTrackModel else 1e-3  # a slower vx slips its driven wheels more
+    assert slowed[two_track.VX] == pytest.approx(GRAVITY * np.sin(0.06) * dt, rel=feedback)
+    assert abs(slowed[two_track.YAW]) < 1e-4 and abs(slowed[two_track.BETA]) < 1e-4  # rad/s, rad: nothing else
+    low_speed = TireForceModel.transition_low_speed
+    if model_class is not TwoTrackModel:  # below min_speed vx integrates ax less the offset
+        assert (low_speed(model, X, flat, dt) - low_speed(model, X, uphill, dt))[0, two_track.VX] == pytest.approx(
+            GRAVITY * np.sin(0.06) * dt)
 
 
 def test_tire_defaults_differ_from_the_plant():

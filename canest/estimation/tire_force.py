@@ -84,19 +84,20 @@ class TireForceEstimator(Estimator):
         return Q
 
     def _control(self, inputs: TickInputs, t: float) -> np.ndarray:
-        """u = (delta, ax, ay, Fx per wheel from eq 4); without motor torques (delta, ax, ay); ay as the loads
-        take it, through the body's roll lag (:mod:`canest.estimation.roll_lag`). Without torques the
-        longitudinal forces, and so vx, follow ax less its offset from the wheels' acceleration (a road's grade,
-        :mod:`canest.estimation.longitudinal_offset`), as the single track's vx does: the core takes the
-        reference speed's integration error as this model's own, so it must integrate the same ax (the loads'
-        share of a grade's gravity, 1 % of a wheel's load per 6 %, is left out with it)."""
+        """u = (delta, ax, ay, ax's offset, Fx per wheel from eq 4); without motor torques (delta, ax, ay, ax's
+        offset); ax and ay as the loads take them, through the body's roll lag (:mod:`canest.estimation.roll_lag`).
+        ax's offset from the wheels' acceleration (a road's grade, :mod:`canest.estimation.longitudinal_offset`)
+        slows vx beside the tires' forces: without torques vx then follows ax less it, as the single track's vx
+        does (the core takes the reference speed's integration error as this model's own, so it must integrate
+        the same ax); with torques a grade's gravity no longer runs vx ahead of the reference speed uphill."""
         ax, ay = self.load_accelerations.update(inputs)
+        offset = self.reference_speed.offset.value
         if not self.torques:
-            return np.array([self._road_wheel_angle(inputs), ax - self.reference_speed.offset.value, ay])
+            return np.array([self._road_wheel_angle(inputs), ax, ay, offset])
         speeds = [inputs.values.get(name, 0.0) for name in WHEEL_SPEEDS]
         fx = longitudinal_forces(torques(inputs), self.wheel_acceleration.update(t, speeds),
                                  self.vehicle.wheel_inertia, self.vehicle.wheel_radius)
-        return np.array([self._road_wheel_angle(inputs), ax, ay, *fx])
+        return np.array([self._road_wheel_angle(inputs), ax, ay, offset, *fx])
 
     def _update(self, channels, inputs: TickInputs, u: np.ndarray, lateral_ok: bool, t: float) -> bool:
         """Non-DICI filters use the first IMU; ``dici-gfckf`` gives local filter j the rows of IMU j."""

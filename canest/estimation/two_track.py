@@ -172,8 +172,10 @@ class FrictionEstimator(Estimator):
         return x0
 
     def _control(self, inputs: TickInputs, t: float) -> np.ndarray:
-        """u = (delta, ax, ay, motor torque per wheel)."""
-        return np.array([self._road_wheel_angle(inputs), *accelerations(inputs), *torques(inputs)])
+        """u = (delta, ax, ay, ax's offset, motor torque per wheel): the offset from the wheels' acceleration (a
+        road's grade, :mod:`canest.estimation.longitudinal_offset`) slows vx beside the tires' forces."""
+        return np.array([self._road_wheel_angle(inputs), *accelerations(inputs), self.reference_speed.offset.value,
+                         *torques(inputs)])
 
     def _derived(self, inputs: TickInputs, t: float, lateral_ok: bool) -> dict:
         """The gyro's yaw acceleration (body moment balance, eq 5) and the reference speed (vx without slip).

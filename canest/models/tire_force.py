@@ -6,13 +6,15 @@ so that the yaw and lateral motion are driven by the force states instead of
 the linear tire of eq 10. Lateral forces are in each wheel's own frame, N,
 positive to the left (ISO 8855).
 
-Input ``u = (delta, ax, ay, Fx_fl, Fx_fr, Fx_rl, Fx_rr)``: road wheel angle,
+Input ``u = (delta, ax, ay, ax_offset, Fx_fl, Fx_fr, Fx_rl, Fx_rr)``: road wheel angle,
 the measured accelerations (for the loads of eq 7, and at low speed for the
 forces' sum ``m ay``; the estimator passes ay through the body's roll lag,
-:mod:`canest.estimation.roll_lag`) and the longitudinal
+:mod:`canest.estimation.roll_lag`), the part of ax the car's speed does not
+follow (a road grade's gravity, :mod:`canest.estimation.longitudinal_offset`)
+and the longitudinal
 tire forces from the in-wheel motors (eq 4, :mod:`canest.models.wheel_force`).
 :class:`AxDrivenTireForceModel` is the same model for cars without motor
-torques: ``u = (delta, ax, ay)`` and the longitudinal forces follow from ax
+torques: ``u = (delta, ax, ay, ax_offset)`` and the longitudinal forces follow from ax
 and the drive layout by eq 1 (:class:`canest.models.wheel_force.DriveLayout`),
 so ax is its input and not its measurement.
 
@@ -20,7 +22,7 @@ Dynamics (:mod:`canest.models.wheels` for eqs 1-3, 7 and 8, :mod:`canest.models.
 for eqs 5, 6 and 13), with ``vy = vx tan(beta)``:
 
     (ax_m, ay_m, dr/dt) = body resultants of (Fx, Fy)           eqs 1-3
-    dvx/dt = ax_m + r vy,   dvy/dt = ay_m - r vx,   dbeta/dt from both (WheelGeometry.body_derivatives)
+    dvx/dt = ax_m + r vy - ax_offset,   dvy/dt = ay_m - r vx,   dbeta/dt from both (WheelGeometry.body_derivatives)
     dFy_ij/dt = V / sigma (Fy_ss,ij - Fy_ij)                    eqs 6, 13 (sign corrected)
     Fy_ss,ij = MF(alpha_ij; K = k_ij Fz_ij, D = mu_nominal Fz_ij), limited by the friction circle with Fx_ij
 
@@ -30,7 +32,7 @@ IMU's. ``SENSOR_SETS`` tells which local filter of the DICI-GFCKF uses which
 rows (0: every local filter).
 
 Low speed (below the estimator's ``min_speed``): slip angles are meaningless,
-so sideslip decays, vx integrates ax, yaw rate is a random walk (as in the
+so sideslip decays, vx integrates ax less its offset, yaw rate is a random walk (as in the
 single-track kinematic model) and each lateral force relaxes within
 ``LOW_SPEED_FORCE_TAU`` to its load share of ``m ay``.
 """
@@ -50,8 +52,8 @@ SENSOR_SETS = (1, 1, 1, 0, 2, 2, 2)
 YAW, BETA, VX = 0, 1, 2
 FY = slice(3, 7)
 AXLE_FORCES = (slice(3, 5), slice(5, 7))  # front (fl, fr), rear (rl, rr)
-DELTA, AX, AY = 0, 1, 2
-FX = slice(3, 7)
+DELTA, AX, AY, AX_OFFSET = 0, 1, 2, 3
+FX = slice(4, 8)
 LOW_SPEED_BETA_TAU = 0.5  # s
 LOW_SPEED_FORCE_TAU = 0.1  # s
 
@@ -91,7 +93,8 @@ class TireForceModel:
         fy = X[:, FY]
         fx = self.longitudinal_forces(X, u)
         out = np.empty_like(X)
-        out[:, YAW], out[:, BETA], out[:, VX] = self.wheels.body_derivatives(r, beta, vx, fx, fy, u[DELTA])
+        out[:, YAW], out[:, BETA], out[:, VX] = self.wheels.body_derivatives(r, beta, vx, fx, fy, u[DELTA],
+                                                                                  u[AX_OFFSET])
         speed = vx / np.cos(beta)
         rate = relaxation_rate(speed, self.tire.relaxation_length)
         out[:, FY] = rate[:, None] * (self.steady_state_forces(r, vx, vx * np.tan(beta), u, fx) - fy)
@@ -104,7 +107,7 @@ class TireForceModel:
     def transition_low_speed(self, X: np.ndarray, u: np.ndarray, dt: float) -> np.ndarray:
         out = X.copy()
         out[:, BETA] *= np.exp(-dt / LOW_SPEED_BETA_TAU)
-        out[:, VX] += u[AX] * dt
+        out[:, VX] += (u[AX] - u[AX_OFFSET]) * dt
         fz = self.wheels.loads(u[AX], u[AY])
         share = self.vehicle.mass * u[AY] * fz / fz.sum()
         out[:, FY] += (1.0 - np.exp(-dt / LOW_SPEED_FORCE_TAU)) * (share - X[:, FY])
@@ -123,7 +126,7 @@ class TireForceModel:
 class AxDrivenTireForceModel(TireForceModel):
     """The tire-force model on what every car sends: longitudinal forces from ax and the drive layout (eq 1).
 
-    ``u = (delta, ax, ay)``. The model's ax equals the measured ax by
+    ``u = (delta, ax, ay, ax_offset)``. The model's ax equals the measured ax by
     construction, so the ax rows (``ax``, ``ax_2``) are not measurements here.
     """
 

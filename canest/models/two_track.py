@@ -3,9 +3,11 @@
 Joint state ``x = (r, beta, vx, w_fl, w_fr, w_rl, w_rr, mu_fl, mu_fr, mu_rl, mu_rr)``:
 the DCKF's vehicle states (yaw, lateral and longitudinal motion plus the four
 wheel speeds, rad/s) followed by its parameters (four road friction
-coefficients, a random walk). Input ``u = (delta, ax, ay, T_fl, T_fr, T_rl, T_rr)``
-with the measured accelerations for the loads (DICI-GFCKF eq 7) and the motor
-torques (N m, positive driving).
+coefficients, a random walk). Input ``u = (delta, ax, ay, ax_offset, T_fl, T_fr, T_rl, T_rr)``
+with the measured accelerations for the loads (DICI-GFCKF eq 7), the part of ax
+the car's speed does not follow (a road grade's gravity, slowing vx beside the
+tires' forces: :meth:`canest.models.wheels.WheelGeometry.body_derivatives`) and
+the motor torques (N m, positive driving).
 
 Forces per wheel (:mod:`canest.models.tire`): Magic Formula of the slip angle
 (eq 10) and the slip ratio (eq 11) with peak ``mu Fz`` and friction-independent
@@ -35,8 +37,8 @@ MEASUREMENT_NAMES = ("ax", "ay", "yaw_rate", "yaw_acceleration", "vx_reference",
 YAW, BETA, VX = 0, 1, 2
 W = slice(3, 7)
 MU = slice(7, 11)
-DELTA, AX, AY = 0, 1, 2
-TORQUE = slice(3, 7)
+DELTA, AX, AY, AX_OFFSET = 0, 1, 2, 3
+TORQUE = slice(4, 8)
 PARAMETERS = 4
 SUBSTEPS = 4
 MU_RANGE = (0.05, 1.5)  # the model clips friction to this range
@@ -107,7 +109,7 @@ class TwoTrackModel:
             rate = (u[TORQUE] - p.wheel_radius * fx) / p.wheel_inertia
             stiffness = p.wheel_radius**2 * np.maximum(slope, 0.0) / (p.wheel_inertia * v_long)
             dr, dbeta, dvx = self.wheels.body_derivatives(X[:, YAW], X[:, BETA], np.maximum(X[:, VX], MIN_WHEEL_SPEED),
-                                                          fx, fy, u[DELTA])
+                                                          fx, fy, u[DELTA], u[AX_OFFSET])
             X[:, W] += h * rate / (1.0 + h * stiffness)
             X[:, YAW] += h * dr
             X[:, BETA] += h * dbeta

@@ -89,15 +89,17 @@ class WheelGeometry:
         return (fx_b.sum(axis=-1) / p.mass, fy_b.sum(axis=-1) / p.mass,
                 (fy_b @ self.pos_x - fx_b @ self.pos_y) / p.yaw_inertia)
 
-    def body_derivatives(self, r, beta, vx, fx, fy, delta):
+    def body_derivatives(self, r, beta, vx, fx, fy, delta, ax_offset):
         """(dr/dt, dbeta/dt, dvx/dt) of points driven by wheel-frame forces (N, 4); vx already floored.
 
-        ``dvx/dt = ax + r vy``, ``dvy/dt = ay - r vx`` (DCKF eqs 1, 3) and, for
-        ``beta = atan(vy / vx)``, ``dbeta/dt = (vx dvy/dt - vy dvx/dt) / (vx^2 + vy^2)``.
+        ``dvx/dt = ax + r vy - ax_offset``, ``dvy/dt = ay - r vx`` (DCKF eqs 1, 3, on a road whose grade's gravity
+        is ``ax_offset = g sin(grade)``: the tires' forces are what an accelerometer reads, and gravity slows the
+        car beside them; the papers' roads are flat) and, for ``beta = atan(vy / vx)``,
+        ``dbeta/dt = (vx dvy/dt - vy dvx/dt) / (vx^2 + vy^2)``.
         """
         vy = vx * np.tan(beta)
         ax, ay, yaw_acc = self.body_accelerations(fx, fy, delta)
-        dvx = ax + r * vy
+        dvx = ax + r * vy - ax_offset
         dvy = ay - r * vx
         return yaw_acc, (vx * dvy - vy * dvx) / (vx * vx + vy * vy), dvx
 

@@ -57,7 +57,7 @@ def single_track_case(vehicle, steps):
 
 def tire_force_case(vehicle, steps):
     model = TireForceModel(vehicle)
-    us = [np.array([d, 0.1, 22.0 * d * 5.0, 30.0, 30.0, 30.0, 30.0]) for d in steering(steps)]
+    us = [np.array([d, 0.1, 22.0 * d * 5.0, 0.0, 30.0, 30.0, 30.0, 30.0]) for d in steering(steps)]
     x0, P0 = np.array([0.0, 0.0, 22.0, 0.0, 0.0, 0.0, 0.0]), np.diag([0.05, 0.05, 2.0, 1e3, 1e3, 1e3, 1e3]) ** 2
     Q = np.diag([0.05, 0.01, 0.3, 3e3, 3e3, 3e3, 3e3]) ** 2 * 0.01
     R = np.diag([0.15, 0.15, 0.005, 0.15]) ** 2
@@ -67,7 +67,7 @@ def tire_force_case(vehicle, steps):
 
 def two_track_case(vehicle, steps):
     model = TwoTrackModel(vehicle)
-    us = [np.array([d, 0.1, 22.0 * d * 5.0, 50.0, 50.0, 50.0, 50.0]) for d in steering(steps)]
+    us = [np.array([d, 0.1, 22.0 * d * 5.0, 0.0, 50.0, 50.0, 50.0, 50.0]) for d in steering(steps)]
     w0 = 22.0 / vehicle.wheel_radius
     x0 = np.array([0.0, 0.0, 22.0, w0, w0, w0, w0, 0.9, 0.9, 0.9, 0.9])
     P0 = np.diag([0.05, 0.05, 2.0, 1.0, 1.0, 1.0, 1.0, 0.3, 0.3, 0.3, 0.3]) ** 2
