@@ -11,6 +11,9 @@ import sys
 import numpy as np
 import pytest
 
+from canest.apps.compare import with_filter
+from canest.apps.evaluate import counts, read_table
+from canest.apps.replay import replay
 from canest.config import load_config
 from canest.sim.mismatch import PlantMismatch, drawn_mismatch
 from tests.conftest import CONFIG, ROOT
@@ -24,6 +27,15 @@ VIBRATING = ("ckf", "dekf", "jckf", "dckf")  # replayed on the small grid with t
 # jckf's sideslip holds half the sideslip its rear tires' saturation makes until the car shows a tire's limit (the
 # first seconds of these 4 s drives; README "How far to trust the output"): NEES 0.54 -> 0.44 here
 NEES_FLOOR = {("jckf", "beta"): 0.4}
+
+
+def replayed(case, name, workdir):
+    """(estimates as a table, truth) of one filter on one simulated drive, every tick."""
+    config = load_config(CONFIG)
+    log, truth = honesty.drive(config, case, workdir)
+    estimates = []
+    replay(with_filter(config, name), log, progress=False, on_estimate=estimates.append)
+    return honesty.table_of(estimates), read_table(truth)
 
 
 @pytest.fixture(scope="module")
@@ -222,11 +234,25 @@ def test_the_tire_force_sideslip_std_is_never_below_a_stiffness_error_held_stead
     model's covariance holds a stiffness error as a noise relaxing within the tires' relaxation length, and in the
     step steer's steady state the measurements average it away: on a vibrating IMU, whose kinematic check cannot
     see 1.2 deg, dici-gfckf's sideslip was 1.2 deg off with a std of 0.36, valid but wrong on 57 % of its valid
-    ticks. The stiffness term is now the std's floor."""
+    ticks. The stiffness term is now the std's floor. (Valid on 7 % of the ticks since the model's vx takes the
+    offset a vibrating ax lets the wheels learn, 17 % before: judged over its valid ticks, more than 30.)"""
     case = honesty.Case("step", 80.0, 0.85, 0, vibration=1.0, car="drawn")
     result = honesty.run_case(CONFIG, ["dici-gfckf"], case, tmp_path)
     score = honesty.summarize("beta", result["sums"]["dici-gfckf"]["beta"])
-    assert score.valid > 0.1 and score.vbw == 0.0 and score.max_error > 1.0, score
+    assert score.samples > 30 and score.vbw == 0.0 and score.max_error > 1.0, score
+
+
+def test_a_sideslip_resting_on_a_friction_pressed_against_its_bound_stays_invalid_for_a_second(tmp_path):
+    """A drawn car's step steer on 0.35 with a vibrating IMU: jckf reads the slide as a split of frictions (the
+    left wheels' at 0.12-0.17, the right's at 0.45-0.5), pressed against their lower bound on one tick, free the
+    next. The sideslip's ``at_bound`` was not held as every failed test is, and between such ticks it was 2 deg
+    off with a std of 0.6, flagged valid (15 % of that drive's valid ticks wrong). Held now where the car showed a
+    tire's limit (this slide), it is valid on fewer than half of the ticks, none of them wrong."""
+    table, truth = replayed(honesty.Case("step", 80.0, 0.35, 1, vibration=1.0, car="drawn"), "jckf", tmp_path)
+    every_tick = counts(table, truth, "beta", only_valid=False, skip=honesty.SKIP)
+    flagged = counts(table, truth, "beta", skip=honesty.SKIP)
+    assert every_tick["max"] > 2.0 and every_tick["wrong"] > 0  # deg: the drive has the error
+    assert flagged["wrong"] == 0 and flagged["n"] < 0.5 * every_tick["n"], flagged
 
 
 def test_a_vibrating_ay_does_not_move_force_between_an_axle_s_wheels(tmp_path):
@@ -297,10 +323,14 @@ def test_a_sideslip_resting_on_a_saturation_the_car_has_not_shown_carries_it_in_
     """On a vibrating country road's gentle curves on 0.85 jckf's frictions fall towards the friction the car uses
     (README "Still weak") and its model's rear tires saturate where the plant's do not: the sideslip was 2-4 deg off
     with a std below a third of that, valid (54-56 s into this drive: 1.3 % of its valid ticks). While the car shows
-    no tire's limit, the std holds half the sideslip the estimate's rear saturation makes beyond linear tires."""
-    case = honesty.Case("country", 80.0, 0.85, 4, duration=60.0, vibration=1.0)
-    score = honesty.summarize("beta", honesty.run_case(CONFIG, ["jckf"], case, tmp_path)["sums"]["jckf"]["beta"])
-    assert score.max_error > 2.0 and score.valid > 0.3 and score.vbw == 0.0, score
+    no tire's limit, the std holds half the sideslip the estimate's rear saturation makes beyond linear tires.
+    Its frictions are now also pressed against their lower bound there, and the sideslip not valid for a second
+    after (the test of a friction pressed against its bound), so the std is judged on every tick: each more than 2 deg off is within 2 std (none without
+    the term)."""
+    table, truth = replayed(honesty.Case("country", 80.0, 0.85, 4, duration=60.0, vibration=1.0), "jckf", tmp_path)
+    error = np.abs(table["beta"] - np.interp(table["t"], truth["t"], truth["beta"]))
+    far = error > np.radians(2.0)
+    assert far.sum() > 100 and np.all(error[far] <= 2.0 * table["beta_std"][far])
 
 
 def test_vx_on_a_hill_is_right_within_its_std(tmp_path):

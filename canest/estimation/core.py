@@ -369,6 +369,13 @@ class Estimator:
         rests on it: :meth:`canest.estimation.judge.StateJudge.causes`); never for a model without frictions."""
         return False
 
+    def _frictions_pressed(self) -> bool:
+        """The last update pressed a friction the sideslip rests on against its physical range: the model cannot
+        explain the data, and the sideslip is ``at_bound`` (:meth:`canest.estimation.judge.StateJudge.causes`;
+        :meth:`canest.estimation.two_track.FrictionEstimator._frictions_pressed`); never for a model without
+        frictions."""
+        return False
+
     def _sideslip_saturation_std(self) -> float:
         """The sideslip's std (rad) from tire saturation the measurements have not shown (none for a model without
         frictions: :meth:`canest.estimation.two_track.FrictionEstimator._sideslip_saturation_std`)."""
@@ -457,7 +464,8 @@ class Estimator:
         lateral = {"low_speed": mode == "low_speed", "after_reset": mode == "degraded" and t < self.suspect_until,
                    "zero_learned": self.steering_zero.learned, "lateral_ok": lateral_ok, "beta": beta, "vx": vx,
                    "delta": self._road_wheel_angle(inputs), "ay_density": self._ay_density(inputs),
-                   "at_limit_of_unbounded_friction": self._at_limit_of_unbounded_friction()}
+                   "at_limit_of_unbounded_friction": self._at_limit_of_unbounded_friction(),
+                   "frictions_pressed": self._frictions_pressed()}
         walk_unknown = self.ax_noise.density is None and reference.last_t == t
         causes = self.judge.causes(inputs, ratios, std[self.vx], lateral, t, drift, walk_unknown)
         valid = {name: causes[name] == "valid" for name in causes}

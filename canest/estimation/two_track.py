@@ -286,6 +286,13 @@ class FrictionEstimator(Estimator):
         super().use_stiffness(front, rear, error)
         self.regime.understeer = self.vehicle.understeer_gradient
 
+    def _frictions_pressed(self) -> bool:
+        """A friction pressed against its bound while the car showed a tire's limit (:meth:`_limit_recent`): the
+        sideslip then rests on the frictions. Where it showed none, the sideslip's std holds the saturation the
+        estimate assumes (:meth:`_sideslip_saturation_std`), and a vibrating IMU presses the frictions on 14-30 %
+        of the ticks of any drive (its noise makes them fall, module docstring)."""
+        return bool(self.filter.parameters.pressed.any()) and self._limit_recent()
+
     def _at_limit_of_unbounded_friction(self) -> bool:
         """A tire at its limit at the estimated friction (``may_rise``, :meth:`_update`) in a filter whose covariance
         does not bound the frictions' error (``parameters_valid`` false: dckf, whose frictions carry the bias of
@@ -320,7 +327,7 @@ class FrictionEstimator(Estimator):
         consistency ratio; not before they have been judged, nor in the second after a reset: the frictions
         outlive a divergence reset and may be what diverged), the update has not pressed it against a bound of
         the physical range (the data then say only that the model cannot explain them: the sideslip loses its
-        bit too), and the filter's covariance bounds its parameters' error (``parameters_valid``: not the dual
+        bit too, for a second, once the car showed a tire's limit: :meth:`_frictions_pressed`), and the filter's covariance bounds its parameters' error (``parameters_valid``: not the dual
         filter's, "uncertain"). The published std adds :class:`FrictionModelError`'s and the range the
         estimate spanned over ``SETTLE_WINDOW`` in quadrature, and is never below the friction's distance from
         the four wheels' mean (module docstring, "one road"); above ``MU_VALID_STD`` through them the cause is
@@ -350,6 +357,3 @@ class FrictionEstimator(Estimator):
         valid["friction"] = any(valid[name] for name in FRICTIONS)
         valid["friction_observable"] = bool(self.observable.any())
         causes["friction"] = "valid" if valid["friction"] else min(wheel_causes, key=validity.CAUSES.index)
-        if pressed.any() and causes["beta"] == "valid":
-            causes["beta"] = "at_bound"
-            valid["beta"] = valid["vy"] = False
