@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from canest.apps.compare import with_filter
-from canest.apps.evaluate import counts, read_table
+from canest.apps.evaluate import counts, read_table, valid_mask
 from canest.apps.replay import replay
 from canest.config import load_config
 from canest.sim.mismatch import PlantMismatch, drawn_mismatch
@@ -253,6 +253,20 @@ def test_a_sideslip_resting_on_a_friction_pressed_against_its_bound_stays_invali
     flagged = counts(table, truth, "beta", skip=honesty.SKIP)
     assert every_tick["max"] > 2.0 and every_tick["wrong"] > 0  # deg: the drive has the error
     assert flagged["wrong"] == 0 and flagged["n"] < 0.5 * every_tick["n"], flagged
+
+
+def test_the_sideslip_is_initializing_until_ay_s_noise_is_measured(tmp_path):
+    """Until ay's samples show its noise the filter takes ay at its configured noise, and before its channels'
+    consistency had 10 samples nothing judged the sideslip: on a vibrating IMU ckf's sideslip was valid on the
+    first 9 ticks of this drive, 5 of them more than 3 std off (the 3-DOF filters' sideslip NEES over the first
+    half second of the drawn cars' grid 3.1, 0.6 after it)."""
+    table, truth = replayed(honesty.Case("step", 80.0, 0.85, 2, vibration=1.0, car="drawn"), "ckf", tmp_path)
+    valid = valid_mask(table, "beta")
+    assert not valid[table["t"] < table["t"][0] + 0.2].any()
+    error = np.abs(table["beta"] - np.interp(table["t"], truth["t"], truth["beta"]))
+    flagged = valid & (table["t"] < table["t"][0] + 0.5)
+    assert not np.any(error[flagged] > 3.0 * table["beta_std"][flagged])
+    assert valid.any()  # and later judged, and valid
 
 
 def test_a_vibrating_ay_does_not_move_force_between_an_axle_s_wheels(tmp_path):

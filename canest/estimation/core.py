@@ -405,6 +405,12 @@ class Estimator:
                   if inputs.has(name) and self.input_noise[name].std is not None]
         return max(ratios, default=1.0)
 
+    def _ay_noise_known(self, inputs: TickInputs) -> bool:
+        """Every lateral accelerometer the model measures and the car sends has its noise measured from its samples
+        (:mod:`canest.estimation.measured_noise`)."""
+        return all(noise.std is not None for name, noise in self.input_noise.items()
+                   if name in LATERAL_ACCELEROMETERS and inputs.has(name))
+
     def _ay_density(self, inputs: TickInputs) -> float:
         """ay's noise density as its samples show it over :data:`INTEGRATED_NOISE_SPAN`, where its noise is above the
         configured at this ay (0 until then, and for a quiet ay: the kinematic check's tolerance is set for it,
@@ -462,7 +468,8 @@ class Estimator:
             "beta_std": std[self.beta], "yaw_rate_std": std[self.yaw],
         }
         lateral = {"low_speed": mode == "low_speed", "after_reset": mode == "degraded" and t < self.suspect_until,
-                   "zero_learned": self.steering_zero.learned, "lateral_ok": lateral_ok, "beta": beta, "vx": vx,
+                   "zero_learned": self.steering_zero.learned, "ay_noise_known": self._ay_noise_known(inputs),
+                   "lateral_ok": lateral_ok, "beta": beta, "vx": vx,
                    "delta": self._road_wheel_angle(inputs), "ay_density": self._ay_density(inputs),
                    "at_limit_of_unbounded_friction": self._at_limit_of_unbounded_friction(),
                    "frictions_pressed": self._frictions_pressed()}
