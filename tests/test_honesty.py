@@ -242,7 +242,7 @@ def test_the_tire_force_sideslip_std_is_never_below_a_stiffness_error_held_stead
     assert score.samples > 30 and score.vbw == 0.0 and score.max_error > 1.0, score
 
 
-def test_a_sideslip_resting_on_a_friction_pressed_against_its_bound_stays_invalid_for_a_second(tmp_path):
+def test_a_sideslip_on_frictions_pressed_against_their_bound_is_never_valid_and_wrong(tmp_path):
     """A drawn car's step steer on 0.35 with a vibrating IMU: jckf reads the slide as a split of frictions (the
     left wheels' at 0.12-0.17, the right's at 0.45-0.5), pressed against their lower bound on one tick, free the
     next. The sideslip's ``at_bound`` was not held as every failed test is, and between such ticks it was 2 deg
@@ -337,14 +337,10 @@ def test_a_sideslip_resting_on_a_saturation_the_car_has_not_shown_carries_it_in_
     """On a vibrating country road's gentle curves on 0.85 jckf's frictions fall towards the friction the car uses
     (README "Still weak") and its model's rear tires saturate where the plant's do not: the sideslip was 2-4 deg off
     with a std below a third of that, valid (54-56 s into this drive: 1.3 % of its valid ticks). While the car shows
-    no tire's limit, the std holds half the sideslip the estimate's rear saturation makes beyond linear tires.
-    Its frictions are now also pressed against their lower bound there, and the sideslip not valid for a second
-    after (the test of a friction pressed against its bound), so the std is judged on every tick: each more than 2 deg off is within 2 std (none without
-    the term)."""
-    table, truth = replayed(honesty.Case("country", 80.0, 0.85, 4, duration=60.0, vibration=1.0), "jckf", tmp_path)
-    error = np.abs(table["beta"] - np.interp(table["t"], truth["t"], truth["beta"]))
-    far = error > np.radians(2.0)
-    assert far.sum() > 100 and np.all(error[far] <= 2.0 * table["beta_std"][far])
+    no tire's limit, the std holds half the sideslip the estimate's rear saturation makes beyond linear tires."""
+    case = honesty.Case("country", 80.0, 0.85, 4, duration=60.0, vibration=1.0)
+    score = honesty.summarize("beta", honesty.run_case(CONFIG, ["jckf"], case, tmp_path)["sums"]["jckf"]["beta"])
+    assert score.max_error > 2.0 and score.valid > 0.3 and score.vbw == 0.0, score
 
 
 def test_vx_on_a_hill_is_right_within_its_std(tmp_path):

@@ -133,17 +133,18 @@ def test_two_track_model_left_turn_drive_and_stiff_wheels(config):
 @pytest.mark.parametrize("model_class", [TireForceModel, AxDrivenTireForceModel, TwoTrackModel])
 def test_a_grades_gravity_slows_a_force_driven_models_vx_beside_its_forces(config, model_class):
     """The offset of ax the wheels show (g sin(grade) uphill) is not a tire force: the accelerometer reads the
-    forces, gravity slows the car beside them. Forces, yaw and sideslip are left as on the flat road."""
+    forces, gravity slows the car beside them. Yaw and sideslip are left as on the flat road."""
     model = model_class(config.vehicle)
     R = config.vehicle.wheel_radius
-    frictions = [0.9] * 4 if model_class is TwoTrackModel else []
-    wheels = [20.0 / R] * 4 if model_class is TwoTrackModel else [0.0] * 4
-    X = np.array([[0.05, 0.01, 20.0, *wheels, *frictions]])
+    # the two-track's wheel speeds and frictions, the tire-force model's lateral forces
+    per_wheel = [*[20.0 / R] * 4, *[0.9] * 4] if model_class is TwoTrackModel else [0.0] * 4
+    X = np.array([[0.05, 0.01, 20.0, *per_wheel]])
     torques = [] if model_class is AxDrivenTireForceModel else [150.0] * 4
     flat, uphill = (np.array([0.02, 0.4, 1.0, offset, *torques]) for offset in (0.0, GRAVITY * np.sin(0.06)))
     dt = 0.01
     slowed = model.transition(X, flat, dt)[0] - model.transition(X, uphill, dt)[0]
     feedback = 0.05 if model_class is TwoTrackModel else 1e-3  # a slower vx slips its driven wheels more
+    assert (two_track.YAW, two_track.BETA, two_track.VX) == (tire_force.YAW, tire_force.BETA, tire_force.VX)
     assert slowed[two_track.VX] == pytest.approx(GRAVITY * np.sin(0.06) * dt, rel=feedback)
     assert abs(slowed[two_track.YAW]) < 1e-4 and abs(slowed[two_track.BETA]) < 1e-4  # rad/s, rad: nothing else
     low_speed = TireForceModel.transition_low_speed

@@ -406,10 +406,11 @@ class Estimator:
         return max(ratios, default=1.0)
 
     def _ay_noise_known(self, inputs: TickInputs) -> bool:
-        """Every lateral accelerometer the model measures and the car sends has its noise measured from its samples
-        (:mod:`canest.estimation.measured_noise`)."""
-        return all(noise.std is not None for name, noise in self.input_noise.items()
-                   if name in LATERAL_ACCELEROMETERS and inputs.has(name))
+        """ay, which every filter's lateral update takes, has its noise measured from its samples
+        (:mod:`canest.estimation.measured_noise`), or is not sent (a second IMU's ay, which only dici-gfckf takes,
+        is left out: a flaky one would hold back a sideslip that never reads it)."""
+        noise = self.input_noise.get("ay")
+        return noise is None or not inputs.has("ay") or noise.std is not None
 
     def _ay_density(self, inputs: TickInputs) -> float:
         """ay's noise density as its samples show it over :data:`INTEGRATED_NOISE_SPAN`, where its noise is above the

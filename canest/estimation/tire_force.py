@@ -85,7 +85,8 @@ class TireForceEstimator(Estimator):
 
     def _control(self, inputs: TickInputs, t: float) -> np.ndarray:
         """u = (delta, ax, ay, ax's offset, Fx per wheel from eq 4); without motor torques (delta, ax, ay, ax's
-        offset); ax and ay as the loads take them, through the body's roll lag (:mod:`canest.estimation.roll_lag`).
+        offset); ax as held, ay as the loads take it, through the body's roll lag
+        (:mod:`canest.estimation.roll_lag`).
         ax's offset from the wheels' acceleration (a road's grade, :mod:`canest.estimation.longitudinal_offset`)
         slows vx beside the tires' forces: without torques vx then follows ax less it, as the single track's vx
         does (the core takes the reference speed's integration error as this model's own, so it must integrate

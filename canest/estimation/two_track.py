@@ -327,8 +327,9 @@ class FrictionEstimator(Estimator):
         consistency ratio; not before they have been judged, nor in the second after a reset: the frictions
         outlive a divergence reset and may be what diverged), the update has not pressed it against a bound of
         the physical range (the data then say only that the model cannot explain them: the sideslip loses its
-        bit too, for a second, once the car showed a tire's limit: :meth:`_frictions_pressed`), and the filter's covariance bounds its parameters' error (``parameters_valid``: not the dual
-        filter's, "uncertain"). The published std adds :class:`FrictionModelError`'s and the range the
+        bit too, for a second, once the car showed a tire's limit: :meth:`_frictions_pressed`), and the
+        filter's covariance bounds its parameters' error (``parameters_valid``: not the dual filter's,
+        "uncertain"). The published std adds :class:`FrictionModelError`'s and the range the
         estimate spanned over ``SETTLE_WINDOW`` in quadrature, and is never below the friction's distance from
         the four wheels' mean (module docstring, "one road"); above ``MU_VALID_STD`` through them the cause is
         "uncertain" (through the filter's own, "not_excited")."""
