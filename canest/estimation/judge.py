@@ -217,11 +217,12 @@ class StateJudge:
         an ay whose noise its samples do not show yet, ``ay_noise_known`` false: "initializing"; the filter took it
         at its configured noise, and on a vibrating IMU the 3-DOF filters' sideslip had a NEES of 3.1 over the
         first half second of the drawn cars' grid, 0.6 after it); ``at_limit_of_unbounded_friction``: a tire
-        works at its limit at a friction whose error no covariance bounds (:meth:`canest.estimation.two_track.FrictionEstimator._at_limit_of_unbounded_friction`),
-        "model_regime"; ``frictions_pressed``: the update pressed a friction the sideslip rests on against its
-        physical range (the model cannot explain the data), "at_bound", held as every failed test is (it
-        flickers tick by tick while a slide is read as a split of frictions: jckf's sideslip on a drawn car's step
-        steer on 0.35 was 2 deg off with a std of 0.6, flagged valid between such ticks)."""
+        works at its limit at a friction whose error no covariance bounds
+        (:meth:`canest.estimation.two_track.FrictionEstimator._at_limit_of_unbounded_friction`), "model_regime";
+        ``frictions_pressed``: the update pressed a friction the sideslip rests on against its physical range (the
+        model cannot explain the data), "at_bound", held as every failed test is (it flickers tick by tick while a
+        slide is read as a split of frictions: jckf's sideslip on a drawn car's step steer on 0.35 was 2 deg off
+        with a std of 0.6, flagged valid between such ticks)."""
         if low_speed:
             return "low_speed"
         if after_reset:
