@@ -11,9 +11,7 @@ import sys
 import numpy as np
 import pytest
 
-from canest.apps.compare import with_filter
 from canest.apps.evaluate import counts, read_table, valid_mask
-from canest.apps.replay import replay
 from canest.config import load_config
 from canest.sim.mismatch import PlantMismatch, drawn_mismatch
 from tests.conftest import CONFIG, ROOT
@@ -33,9 +31,7 @@ def replayed(case, name, workdir):
     """(estimates as a table, truth) of one filter on one simulated drive, every tick."""
     config = load_config(CONFIG)
     log, truth = honesty.drive(config, case, workdir)
-    estimates = []
-    replay(with_filter(config, name), log, progress=False, on_estimate=estimates.append)
-    return honesty.table_of(estimates), read_table(truth)
+    return honesty.replayed(config, name, log)[0], read_table(truth)
 
 
 @pytest.fixture(scope="module")

@@ -29,6 +29,9 @@ def test_free_rolling_wheels_give_the_speed_less_their_linear_slip():
     assert std == pytest.approx(ANCHORED_STD)
 
 
+SIX_PERCENT = 9.81 * np.sin(np.arctan(0.06))  # m/s^2 the accelerometer reads of gravity uphill at 6 %
+
+
 def launch(ref, t0, ax, offset=0.0, seconds=1.0, dt=0.01):
     """``seconds`` of a launch from 50 rad/s at ``t0``: the car accelerates at ``ax``, its wheels spin up three times
     faster, the accelerometer reads ``ax + offset`` (a grade's gravity); the last (speed, std)."""
@@ -49,13 +52,12 @@ def test_spinning_wheels_are_not_followed_and_the_uncertainty_grows():
 def test_a_road_grade_free_rolling_wheels_measured_is_taken_out_of_the_integrated_ax():
     """Uphill at 6 % the accelerometer reads 0.59 m/s^2 of gravity at a steady speed; integrated, it ran the
     reference away from the car (and no wheel was ever in step with it: their R dw/dt is 0)."""
-    grade = 9.81 * np.sin(np.arctan(0.06))
     ref = reference()
     for k in range(301):  # 3 s at a steady speed on the hill
-        ref.update(k * 0.01, grade, np.full(4, 50.0), ROLLING, ROLLING)
+        ref.update(k * 0.01, SIX_PERCENT, np.full(4, 50.0), ROLLING, ROLLING)
     assert ref.anchored_at == ref.last_t  # the wheels in step with ax less its offset
-    assert ref.offset.value == pytest.approx(grade, abs=0.05)
-    speed, std = launch(ref, ref.last_t, 3.0, offset=grade)
+    assert ref.offset.value == pytest.approx(SIX_PERCENT, abs=0.05)
+    speed, std = launch(ref, ref.last_t, 3.0, offset=SIX_PERCENT)
     assert speed == pytest.approx(RADIUS * 50.0 + 3.0, abs=0.05)
     assert std == pytest.approx(np.hypot(ANCHORED_STD, max(DRIFT, ref.offset.measured_std) * 1.0))
 
@@ -82,10 +84,9 @@ def test_a_grade_that_begins_on_the_way_is_learned_anew():
     """A climb begun in a bend, where nothing is learned, shows on the next straight as a step the offset's
     settled variance gates out: its random walk would take 10 s to admit 6 %, the reference integrating gravity."""
     ref, t0 = rolled(3.0)
-    grade = 9.81 * np.sin(np.arctan(0.06))
     for k in range(1, 301):  # 3 s at a steady speed on the hill
-        ref.update(t0 + k * 0.01, grade, np.full(4, 50.0), ROLLING, ROLLING)
-    assert ref.offset.value == pytest.approx(grade, abs=0.05)
+        ref.update(t0 + k * 0.01, SIX_PERCENT, np.full(4, 50.0), ROLLING, ROLLING)
+    assert ref.offset.value == pytest.approx(SIX_PERCENT, abs=0.05)
 
 
 def test_an_estimate_off_the_reference_is_off_by_what_the_reference_s_std_does_not_explain():

@@ -92,6 +92,13 @@ def table_of(estimates) -> dict:
     return table
 
 
+def replayed(config, name: str, log: Path) -> tuple:
+    """(the estimates as :func:`table_of`'s columns, the replay's summary) of filter ``name`` on ``log``."""
+    estimates = []
+    summary = replay(with_filter(config, name), log, progress=False, on_estimate=estimates.append)
+    return table_of(estimates), summary
+
+
 def run_case(config_path, filters, case: Case, workdir: Path) -> dict:
     """{filter: {state: sums}} of one case (empty if the drive could not be simulated), and seconds per filter."""
     config = load_config(config_path)
@@ -101,12 +108,10 @@ def run_case(config_path, filters, case: Case, workdir: Path) -> dict:
     truth = read_table(paths[1])
     result = {"case": case, "sums": {}, "seconds": {}, "resets": {}}
     for name in filters:
-        estimates = []
         started = time.perf_counter()
-        summary = replay(with_filter(config, name), paths[0], progress=False, on_estimate=estimates.append)
+        table, summary = replayed(config, name, paths[0])
         result["seconds"][name] = time.perf_counter() - started
         result["resets"][name] = summary.get("resets", 0)
-        table = table_of(estimates)
         result["sums"][name] = {s: counts(table, truth, s, skip=SKIP) for s in STATES if s in table and s in truth}
     return result
 

@@ -73,10 +73,10 @@ class LongitudinalOffset:
         share all but a tick: each tick's measurement counts as that share of an independent one."""
         if self.last_t is not None and t < self.last_t:  # time ran backwards: another log, another road
             self.reset()
-        if self.last_t is not None and 0.0 < t - self.last_t:
-            self.integral += acceleration * (t - self.last_t)
-            self.variance = min(self.variance + WALK**2 * (t - self.last_t), PRIOR_STD**2)
         dt = t - self.last_t if self.last_t is not None else 0.0
+        if dt > 0.0:
+            self.integral += acceleration * dt
+            self.variance = min(self.variance + WALK**2 * dt, PRIOR_STD**2)
         self.last_t = t
         if abs(turning) >= STRAIGHT or any(abs(x) >= free_usage for x in usage) or not 0.0 < dt <= GAP:
             self.span.clear()
