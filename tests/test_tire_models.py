@@ -80,6 +80,15 @@ def test_wheel_acceleration_recovers_a_ramp_and_ignores_one_outlier():
     assert abs(slope[1] - 3.0) < 0.35 * 5.0 / 0.01 / 10
 
 
+@pytest.mark.parametrize("window", (5, 7))
+def test_the_wheel_acceleration_s_noise_gain_is_the_scatter_of_its_slopes_of_white_noise(window):
+    """What the yaw acceleration's std takes from a gyro's noise (:mod:`canest.estimation.two_track`)."""
+    rng = np.random.default_rng(1)
+    estimator = WheelAcceleration(window)
+    slopes = [estimator.update(0.01 * k, [0.02 * rng.standard_normal()])[0] for k in range(20000)][window:]
+    assert np.std(slopes) == pytest.approx(0.02 * estimator.noise_gain(), rel=0.03)
+
+
 def test_eq4_reproduces_the_plants_longitudinal_force(dlc_run, config):
     """Fx = (T - J dw/dt) / R against the simulator's tire force; the difference is its rolling resistance."""
     _, _, sim = dlc_run

@@ -29,14 +29,16 @@ variance gives it, and it is that scatter the estimate carries. A channel
 sampled more sparsely than two samples a span gets spans of ``PER_SPAN``
 sampling periods (a 20 Hz gyro: 75 ms).
 
-The estimator (:mod:`canest.estimation.core`) takes it five ways, never
+The estimator (:mod:`canest.estimation.core`) takes it six ways, never
 below the configured values, so a quiet sensor changes nothing: an
 accelerometer channel's R (ax, ay; the consistency test takes it too, but
 friction's and the divergence test keep the configured noise,
 :mod:`canest.estimation.validity`; the
 published ``InnovationNis`` is the filter's, with the R it used); the published yaw
 rate's std, times the gyro's measured over configured noise
-(:meth:`canest.estimation.judge.StateJudge.widen`); vx's process noise where
+(:meth:`canest.estimation.judge.StateJudge.widen`), and the two-track model's yaw acceleration, the gyro's slope,
+by the slope of the gyro's noise beyond the configured (its R:
+:meth:`canest.estimation.two_track.FrictionEstimator._yaw_acceleration_noise`); vx's process noise where
 vx integrates the measured ax; and the reference speed's std while it
 integrates ax (:mod:`canest.estimation.reference_speed`), both from ax's
 density over 0.1 s spans (:data:`canest.estimation.core.INTEGRATED_NOISE_SPAN`; the

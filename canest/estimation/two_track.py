@@ -2,7 +2,8 @@
 four road frictions. It runs with the joint CKF (``jckf``, the default) or
 the DCKF paper's double CKF (``dckf``). Beyond the paper's measurements it
 gives the filter two derived channels: the yaw acceleration from the gyro
-(Theil-Sen slope over ``YAW_ACCELERATION_WINDOW`` samples), which with ay
+(Theil-Sen slope over ``YAW_ACCELERATION_WINDOW`` samples; its std grows by
+the slope of the gyro's noise beyond the configured), which with ay
 splits the lateral force between the axles, and a reference speed that does
 not follow slipping wheels (:mod:`canest.estimation.reference_speed`), which makes the
 slip ratio, and so a spinning wheel's friction, observable.
@@ -192,6 +193,29 @@ class FrictionEstimator(Estimator):
         if reference is not None:
             derived["vx_reference"] = (*reference, 0.0)
         return derived
+
+    def _measured(self, channels):
+        """As every model's (the accelerometers' noise as their samples show it), and the yaw acceleration's std
+        with the slope that the gyro's noise beyond its configured puts into it (:meth:`_yaw_acceleration_noise`).
+        Friction's consistency keeps the configured (:meth:`canest.estimation.judge.StateJudge.record`)."""
+        measured = super()._measured(channels)
+        row = self.model.measurement_names.index("yaw_acceleration")
+        measured.std[row] = math.hypot(measured.std[row], self._yaw_acceleration_noise())
+        return measured
+
+    def _yaw_acceleration_noise(self) -> float:
+        """The std (rad/s^2) a gyro noisier than configured puts into the yaw acceleration, its slope over
+        ``YAW_ACCELERATION_WINDOW`` samples: the excess ``sqrt(s^2 - r^2)`` of the gyro's noise as its samples show
+        it (``s``, :mod:`canest.estimation.measured_noise`) over the configured ``r``, through the slope's gain
+        (:meth:`canest.models.wheel_force.WheelAcceleration.noise_gain`; 0 while the gyro's noise is not measured).
+        The configured yaw acceleration noise (0.1 rad/s^2) is a quiet gyro's slope noise and the moment balance's
+        error; a body vibrating the gyro by 0.3 deg/s, correlated over 15 ms, adds 0.12 over 7 samples at 100 Hz,
+        which the filter had taken as 2.4 times as certain as it was."""
+        gyro = self.input_noise.get("yaw_rate")
+        if gyro is None or gyro.std is None:
+            return 0.0
+        configured = self.r_std[self.model.measurement_names.index("yaw_rate")]
+        return math.sqrt(max(gyro.std**2 - configured**2, 0.0)) * self.yaw_acceleration.noise_gain()
 
     def _update(self, channels, inputs: TickInputs, u: np.ndarray, lateral_ok: bool, t: float) -> bool:
         """Open or close the friction gate and say which frictions may rise, then update as every model does.

@@ -38,6 +38,7 @@ from itertools import combinations
 import numpy as np
 
 WINDOW = 5  # samples
+MEDIAN_SLOPE_NOISE = 1.07  # std of the median of pairwise slopes over a least-squares slope's, white noise
 
 
 class WheelAcceleration:
@@ -66,6 +67,15 @@ class WheelAcceleration:
 
     def reset(self) -> None:
         self.count = 0
+
+    def noise_gain(self) -> float:
+        """The slope's std per unit std of a white noise on the samples held (1/s; 0 before two samples): a
+        least-squares slope's is ``1 / sqrt(sum((t_i - mean(t))^2))``, the median of pairwise slopes'
+        ``MEDIAN_SLOPE_NOISE`` times that (7 samples 10 ms apart, 20 000 slopes of a unit white noise: 20.3 / s,
+        least squares 18.9)."""
+        times = self.times[:self.samples]
+        spread = float(np.sqrt(np.sum((times - times.mean()) ** 2))) if self.samples else 0.0
+        return MEDIAN_SLOPE_NOISE / spread if spread > 0.0 else 0.0
 
     def update(self, t: float, wheel_speeds) -> np.ndarray:
         """Add the speeds (rad/s) of tick ``t``; the accelerations (rad/s^2), zero until two samples exist.
