@@ -150,7 +150,7 @@ class FrictionEstimator(Estimator):
         self.persistence, self.memory = max(1, round(LIMIT_PERSISTENCE / self.dt)), round(LIMIT_MEMORY / self.dt)
         self.reference = None  # (speed, std) of this tick's reference speed, :meth:`_derived`
         self.saturation_slip = 0.0  # rad of rear slip angle from a saturation not shown, :meth:`_saturation_slip`
-        self.pressed_in_episode = False  # a friction was pressed in the limit still showing, :meth:`_note_pressed`
+        self.pressed_in_episode = False  # pressed since the tire's limit, still showing, showed: _note_pressed
         correlation = self.est.friction_correlation
         mixing = correlation * np.ones((4, 4)) + (1.0 - correlation) * np.eye(4)
         for matrix in (self.Q, self.p0):  # the four wheels are on one road: correlated prior and random walk
@@ -261,10 +261,10 @@ class FrictionEstimator(Estimator):
         self.since_limit = 0 if self.limit_ticks >= self.persistence else self.since_limit + 1
 
     def _note_pressed(self) -> None:
-        """Whether this update pressed a friction against its bound while the car showed a tire's limit
-        (:meth:`_limit_recent`), or one did earlier in the limit still showing (within ``LIMIT_PERSISTENCE`` s):
-        the model could not explain that slide, and the sideslip it left need not be right when the frictions come
-        free of the bound in the same slide (:meth:`_frictions_pressed`)."""
+        """Note whether this update pressed a friction against its bound while the car showed a tire's limit
+        (:meth:`_limit_recent`), or one did earlier in a limit that still shows (shown within ``LIMIT_PERSISTENCE``
+        s): the model could not explain that slide, and the sideslip it left need not be right when the frictions
+        come free of the bound in the same slide (:meth:`_frictions_pressed`)."""
         pressed = bool(self.filter.parameters.pressed.any()) and self._limit_recent()
         showing = self.since_limit <= self.persistence
         self.pressed_in_episode = pressed or (self.pressed_in_episode and showing)
