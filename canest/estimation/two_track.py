@@ -141,6 +141,9 @@ class FrictionEstimator(Estimator):
         super().__init__(config, TwoTrackModel(config.vehicle, config.vehicle.tire))
         self.observable = np.zeros(len(FRICTIONS), dtype=bool)
         self.yaw_acceleration = WheelAcceleration(YAW_ACCELERATION_WINDOW)
+        # the rows of the derived yaw acceleration and of the gyro it is derived from (:meth:`_measured`)
+        self.yaw_acceleration_row, self.gyro_row = map(self.model.measurement_names.index,
+                                                       ("yaw_acceleration", "yaw_rate"))
         self.last_friction = None
         self.model_error = FrictionModelError(config.vehicle.cornering_stiffness_uncertainty, self.dt)
         self.recent = deque(maxlen=max(1, round(SETTLE_WINDOW / self.dt)))  # the frictions over SETTLE_WINDOW
@@ -199,7 +202,7 @@ class FrictionEstimator(Estimator):
         with the slope that the gyro's noise beyond its configured puts into it (:meth:`_yaw_acceleration_noise`).
         Friction's consistency keeps the configured (:meth:`canest.estimation.judge.StateJudge.record`)."""
         measured = super()._measured(channels)
-        row = self.model.measurement_names.index("yaw_acceleration")
+        row = self.yaw_acceleration_row
         measured.std[row] = math.hypot(measured.std[row], self._yaw_acceleration_noise())
         return measured
 
@@ -214,7 +217,7 @@ class FrictionEstimator(Estimator):
         gyro = self.input_noise.get("yaw_rate")
         if gyro is None or gyro.std is None:
             return 0.0
-        configured = self.r_std[self.model.measurement_names.index("yaw_rate")]
+        configured = self.r_std[self.gyro_row]
         return math.sqrt(max(gyro.std**2 - configured**2, 0.0)) * self.yaw_acceleration.noise_gain()
 
     def _update(self, channels, inputs: TickInputs, u: np.ndarray, lateral_ok: bool, t: float) -> bool:
