@@ -65,6 +65,7 @@ TIRE = {
     "longitudinal_shape": Range(0.5, 3.0),
     "longitudinal_curvature": Range(-10.0, 1.0),
     "relaxation_length": Range(0.01, 5.0, "m"),
+    "rolling_resistance": Range(0.0, 0.05),
     "nominal_friction": Range(0.05, 2.0),
 }
 

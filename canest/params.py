@@ -23,6 +23,9 @@ class TireModelParams:
     longitudinal_shape: float = 1.65  # C (textbook value for brake/drive force)
     longitudinal_curvature: float = 0.0
     relaxation_length: float = 0.5  # m
+    # F_r / Fz of the rolling moment (a passenger tire on asphalt: 0.010-0.015): part of a motor's torque that turns
+    # no tire force, so makes no slip (a wheel rolling forward: J dw/dt = T - R (Fx + f_r Fz))
+    rolling_resistance: float = 0.012
     nominal_friction: float = 0.9  # mu of the 7-state tire-force model
 
 

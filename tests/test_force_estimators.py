@@ -124,13 +124,17 @@ def test_low_friction_is_flagged_valid_where_the_car_shows_its_limit(config, tmp
 
 
 def test_friction_does_not_rise_on_a_tire_below_its_limit(config):
-    """The 0.85 launch uses up to ~70 % of the grip; the model's stiffer-than-modelled tire must not read as friction."""
+    """The 0.85 launch uses up to ~70 % of the grip; the model's stiffer-than-modelled tire must not read as friction.
+    Below its limit a tire's friction is not observed: it ends where its published std says, never valid (the rear
+    ended 0.69-0.70 with a std of 0.23 once the rolling moment left the tires' force; 0.72-0.73 before)."""
     sim = simulate(config, "launch", 40.0, 0.85, seed=0)
     pipeline = Pipeline(with_filter(config, "jckf"))
     estimates = [e for frame in sim.frames for e in pipeline.feed(frame)]
     frictions = np.array([[e.values[f"mu_{w}"] for w in WHEELS] for e in estimates[50:]])
     assert np.all(frictions < 1.05)  # prior 0.90 +- 0.30; without the one-sided rule it climbed to 1.3
-    assert np.all(np.abs(frictions[-1] - 0.85) < 0.15)
+    last = estimates[-1]
+    assert all(abs(last.values[f"mu_{w}"] - 0.85) < last.values[f"mu_{w}_std"] for w in WHEELS)
+    assert last.causes["friction"] == "not_excited"
 
 
 def test_a_divergence_reset_keeps_the_friction(config, low_friction_sine):

@@ -265,7 +265,7 @@ def test_a_car_without_torques_accelerating_is_not_measured_by_its_driven_wheels
     for k in range(1, 101):
         v += ax * dt
         inputs = tick_inputs(k * dt, {"ax": ax, "ay": 0.0})
-        usage = tick_usage(inputs, geometry, vehicle.wheel_radius, layout)
+        usage = tick_usage(inputs, geometry, vehicle, layout)
         wheels = slip * v / vehicle.wheel_radius
         speed, std = ref.update(k * dt, ax, wheels, np.full(4, ax / vehicle.wheel_radius), usage)
     assert speed == pytest.approx(v, abs=0.01)

@@ -41,7 +41,7 @@ def wheel_speed(inputs: TickInputs, geometry: WheelGeometry, vehicle: VehiclePar
     if not inputs.has(*TORQUES):
         return inputs.wheel_speed(vehicle.wheel_radius)
     return slip_free_speed([inputs.values[name] for name in WHEEL_SPEEDS],
-                           tick_usage(inputs, geometry, vehicle.wheel_radius), vehicle.wheel_radius,
+                           tick_usage(inputs, geometry, vehicle), vehicle.wheel_radius,
                            vehicle.tire.longitudinal_stiffness)
 
 

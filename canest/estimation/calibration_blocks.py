@@ -45,6 +45,7 @@ class BlockMeans:
         self.summed = self.used + self.torques
         self.geometry = WheelGeometry(vehicle)
         self.slip_stiffness = vehicle.tire.longitudinal_stiffness
+        self.rolling_resistance = vehicle.tire.rolling_resistance
         self.radius = vehicle.wheel_radius
         self.ticks = ticks
         self.sums = np.zeros(len(self.summed))
@@ -68,7 +69,7 @@ class BlockMeans:
             return None
         ay, ax = float(means[5]), float(means[7]) if self.ax is not None else None
         # from the block's means: the torques change little in 0.1 s, and the slip is a fraction of a percent
-        usage = (tire_usage(means[len(self.used):], self.geometry.loads(ax, ay), self.radius) if self.torques
-                 else (0.0,) * 4)
+        usage = (tire_usage(means[len(self.used):], self.geometry.loads(ax, ay), self.radius, self.rolling_resistance)
+                 if self.torques else (0.0,) * 4)
         wheel_speed = float(slip_free_speed(means[:4], usage, self.radius, self.slip_stiffness))
         return Block(wheel_speed, float(means[4]), ay, ax, float(means[6]))

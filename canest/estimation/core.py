@@ -269,7 +269,7 @@ class Estimator:
             self.reference_speed.coast(t, acceleration, self.ax_noise.density or 0.0)
             return None
         speeds = [inputs.values[name] for name in WHEEL_SPEEDS]
-        usage = tick_usage(inputs, self.geometry, self.vehicle.wheel_radius, self.layout)
+        usage = tick_usage(inputs, self.geometry, self.vehicle, self.layout)
         accelerations = self.reference_wheel_acceleration.update(t, speeds).tolist()
         delta = self._road_wheel_angle(inputs)
         front_excess = vx * (math.cos(delta) - 1.0) + (vy + self.vehicle.cg_to_front * yaw_rate) * math.sin(delta)

@@ -97,7 +97,8 @@ class TireForceEstimator(Estimator):
             return np.array([self._road_wheel_angle(inputs), ax, ay, offset])
         speeds = [inputs.values.get(name, 0.0) for name in WHEEL_SPEEDS]
         fx = longitudinal_forces(torques(inputs), self.wheel_acceleration.update(t, speeds),
-                                 self.vehicle.wheel_inertia, self.vehicle.wheel_radius)
+                                 self.vehicle.wheel_inertia, self.vehicle.wheel_radius,
+                                 self.vehicle.tire.rolling_resistance * self.model.wheels.loads(ax, ay))
         return np.array([self._road_wheel_angle(inputs), ax, ay, offset, *fx])
 
     def _update(self, channels, inputs: TickInputs, u: np.ndarray, lateral_ok: bool, t: float) -> bool:

@@ -309,8 +309,7 @@ class FrictionEstimator(Estimator):
         speed, std = self.reference
         usage = np.array(self.reference_speed.usage)  # this tick's: the reference was updated by the wheels at t
         if inputs.current("ax") < 0.0:
-            usage = np.minimum(usage, tick_usage(inputs, self.geometry, self.vehicle.wheel_radius, self.layout,
-                                                 use_torques=False))
+            usage = np.minimum(usage, tick_usage(inputs, self.geometry, self.vehicle, self.layout, use_torques=False))
         beta = self.filter.x[two_track.BETA]
         v_long, _ = self.geometry.wheel_velocities(np.array([inputs.current("yaw_rate")]), np.array([speed]),
                                                    np.array([speed * math.tan(beta)]), u[two_track.DELTA])

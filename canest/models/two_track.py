@@ -12,7 +12,8 @@ the motor torques (N m, positive driving).
 Forces per wheel (:mod:`canest.models.tire`): Magic Formula of the slip angle
 (eq 10) and the slip ratio (eq 11) with peak ``mu Fz`` and friction-independent
 stiffness, limited together by the friction circle. Then (:mod:`canest.models.wheels`)
-the body motion of eqs 1-5 and the wheels ``J dw/dt = T - R Fx`` (eq 6).
+the body motion of eqs 1-5 and the wheels ``J dw/dt = T - R (Fx + f_r Fz)`` (eq 6 with the rolling
+moment, ``vehicle.tire.rolling_resistance``).
 
 Discretization: ``SUBSTEPS`` semi-implicit Euler steps per loop period. A
 wheel's slip dynamics are stiff (time constant ``J v / (R^2 K)``, ~2 ms at
@@ -104,9 +105,10 @@ class TwoTrackModel:
         p = self.vehicle
         h = dt / SUBSTEPS
         X = X.copy()
+        rolling = self.tire.rolling_resistance * self.wheels.loads(u[AX], u[AY])  # f_r Fz: a wheel rolling forward
         for _ in range(SUBSTEPS):
             fx, fy, slope, v_long = self.forces(X, u)
-            rate = (u[TORQUE] - p.wheel_radius * fx) / p.wheel_inertia
+            rate = (u[TORQUE] - p.wheel_radius * (fx + rolling)) / p.wheel_inertia
             stiffness = p.wheel_radius**2 * np.maximum(slope, 0.0) / (p.wheel_inertia * v_long)
             dr, dbeta, dvx = self.wheels.body_derivatives(X[:, YAW], X[:, BETA], np.maximum(X[:, VX], MIN_WHEEL_SPEED),
                                                           fx, fy, u[DELTA], u[AX_OFFSET])

@@ -1,15 +1,15 @@
 """Longitudinal tire forces: from the in-wheel motors (DICI-GFCKF paper eq 4), or from ax and the drive layout.
 
-**From the motors.** Each wheel's rotational dynamics, ``J dw/dt = T - R Fx`` (DCKF paper eq 6,
-whose ``F_x R w`` carries a stray ``w``), give
+**From the motors.** Each wheel's rotational dynamics, ``J dw/dt = T - R (Fx + f_r Fz)`` (DCKF paper
+eq 6, whose ``F_x R w`` carries a stray ``w``, with the rolling moment ``f_r Fz R`` the paper leaves out), give
 
-    Fx = (T - J dw/dt) / R
+    Fx = (T - J dw/dt) / R - f_r Fz
 
 The paper's eq 4 prints ``J w`` (an angular momentum, N m s, not a torque); the
 derivative is meant. ``dw/dt`` comes from the noisy wheel speeds through
-:class:`WheelAcceleration`. Rolling resistance and brake torque are not in the
-balance: on the simulator (0.012 Fz rolling resistance) this reads ~55 N high
-per wheel.
+:class:`WheelAcceleration`. ``f_r`` is ``vehicle.tire.rolling_resistance``
+(without it, on the simulator's 0.012 Fz, Fx read ~55 N high per wheel). Brake
+torque is not in the balance.
 
 **From ax and the drive layout** (:class:`DriveLayout`, for cars that send no
 motor torques). The paper's eq 1 is the body's longitudinal balance,
@@ -97,9 +97,11 @@ class WheelAcceleration:
         return 0.5 * (slopes[middle] + slopes[-1 - middle])
 
 
-def longitudinal_forces(torque, wheel_acceleration, wheel_inertia: float, wheel_radius: float) -> np.ndarray:
-    """Eq 4 corrected: ``Fx = (T - J dw/dt) / R`` per wheel, N."""
-    return (np.asarray(torque, dtype=float) - wheel_inertia * np.asarray(wheel_acceleration)) / wheel_radius
+def longitudinal_forces(torque, wheel_acceleration, wheel_inertia: float, wheel_radius: float,
+                        rolling=0.0) -> np.ndarray:
+    """Eq 4 corrected: ``Fx = (T - J dw/dt) / R - f_r Fz`` per wheel, N; ``rolling``: ``f_r Fz`` per wheel (N), the
+    rolling moment's share of the torque, which no tire force carries (:class:`canest.params.TireModelParams`)."""
+    return (np.asarray(torque, dtype=float) - wheel_inertia * np.asarray(wheel_acceleration)) / wheel_radius - rolling
 
 
 class DriveLayout:
