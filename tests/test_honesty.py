@@ -23,8 +23,9 @@ FILTERS = ("ckf", "mcsckf", "svd-fckf", "jckf", "dici-gfckf")
 CALIBRATED = ("ckf", "mcsckf", "svd-fckf", "jckf")  # standard deviations covering the error at +-2 std
 VIBRATING = ("ckf", "dekf", "jckf", "dckf")  # replayed on the small grid with the IMU vibrating
 # jckf's sideslip holds half the sideslip its rear tires' saturation makes until the car shows a tire's limit (the
-# first seconds of these 4 s drives; README "How far to trust the output"): NEES 0.54 -> 0.44 here
-NEES_FLOOR = {("jckf", "beta"): 0.4}
+# first seconds of these 4 s drives; README "How far to trust the output"): NEES 0.54 -> 0.44 here; 0.38 since the
+# rolling moment is no tire force (the estimate nearer the truth, its std the same: full grid RMSE 0.372 -> 0.361 deg)
+NEES_FLOOR = {("jckf", "beta"): 0.35}
 
 
 def replayed(case, name, workdir):
@@ -247,11 +248,13 @@ def test_a_sideslip_on_frictions_pressed_against_their_bound_is_never_valid_and_
     tire's limit (this slide), it is valid on fewer than half of the ticks, none of them wrong. The exact car: the
     frictions, pressed until 3.9 s, came free of the bound at 4.9 s with the sideslip 2 deg off and climbing back
     slower than the car's, flagged valid with a std of 0.6-1.0 (31 ticks): ``at_bound`` now lasts while the limit
-    the frictions were pressed in still shows."""
+    the frictions were pressed in still shows. Since the rolling moment is no tire force the drawn car's sideslip
+    is within 3 std on every tick, valid or not (at most 2.2 deg off, 2.6 before; 49 ticks beyond 3 std): there the
+    test guards the outcome, the exact car the hold."""
     table, truth = replayed(honesty.Case("step", 80.0, 0.35, 1, vibration=1.0, car=car), "jckf", tmp_path)
     every_tick = counts(table, truth, "beta", only_valid=False, skip=honesty.SKIP)
     flagged = counts(table, truth, "beta", skip=honesty.SKIP)
-    assert every_tick["max"] > 2.0 and every_tick["wrong"] > 0  # deg: the drive has the error
+    assert every_tick["max"] > 2.0 and (car == "drawn" or every_tick["wrong"] > 0)  # deg: the drive has the error
     assert flagged["wrong"] == 0 and flagged["n"] < 0.5 * every_tick["n"], flagged
 
 

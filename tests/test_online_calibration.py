@@ -165,7 +165,10 @@ def test_learns_speed_scale_gyro_bias_and_lateral_offset_on_the_drive(learned):
     calibration = learned[0].calibration
     value = dict(zip(NAMES, calibration.x))
     print({name: round(float(v), 5) for name, v in value.items()})
-    assert value["speed"] == pytest.approx(WRONG.wheel_radius_scale, abs=0.002)  # 0.16 % low; the raw wheels: 0.3 %
+    # 0.26 % low (the raw wheels: 0.3 %); issue 17 asks 10 % of the radius's 3 % error. The wheels' slip-free speed
+    # is within 0.03 % of the true speed on this drive (1.0303 against 1.03): the rest is the learner's. It was 0.16 %
+    # while the rolling moment was taken as tire force, a 0.08 % slip the wheels do not have, partly offsetting it.
+    assert value["speed"] == pytest.approx(WRONG.wheel_radius_scale, abs=0.003)
     assert value["gyro_bias"] == pytest.approx(WRONG.gyro_bias, abs=math.radians(0.05))
     assert value["ay_bias"] == pytest.approx(WRONG.ay_bias - WRONG.bank_acceleration, abs=0.03)
     assert calibration.updates["kinematic"] > 200 and calibration.updates["steering"] > 200
@@ -623,7 +626,8 @@ def test_a_block_with_a_stale_input_teaches_nothing(config):
 
 def test_the_speed_scale_is_learned_from_the_wheels_without_their_drive_slip(config):
     """With the motor torques mapped, a block's speed is the wheels' without the slip their torques need, as the
-    estimator's reference speed takes it: ``R mean(w / (1 + T / (R Fz k)))`` at the block's loads."""
+    estimator's reference speed takes it: ``R mean(w / (1 + (T / (R Fz) - f_r) / k))`` at the block's loads (the
+    rolling moment's share ``f_r`` makes no slip)."""
     names = (*NAMES_IN, "motor_torque_fl", "motor_torque_fr", "motor_torque_rl", "motor_torque_rr")
     vehicle = config.vehicle
     blocks = BlockMeans(names, vehicle, 10)
@@ -636,7 +640,8 @@ def test_the_speed_scale_is_learned_from_the_wheels_without_their_drive_slip(con
         block = blocks.add(Sample(k * 0.01, names, values, np.zeros(n, bool), np.ones(n, bool), np.zeros(n),
                                   np.zeros(n, bool)))
     loads = WheelGeometry(vehicle).loads(0.5, 2.0)
-    slip = torques / (vehicle.wheel_radius * loads) / vehicle.tire.longitudinal_stiffness
+    usage = torques / (vehicle.wheel_radius * loads) - vehicle.tire.rolling_resistance
+    slip = usage / vehicle.tire.longitudinal_stiffness
     assert block.wheel_speed == pytest.approx(vehicle.wheel_radius * np.mean(w / (1.0 + slip)), rel=1e-12)
     assert block.wheel_speed < vehicle.wheel_radius * w.mean() * (1.0 - 1e-4)  # the slip is taken out
     raw = BlockMeans(NAMES_IN, vehicle, 10)  # no torques mapped: the plain mean
