@@ -62,8 +62,8 @@ def test_body_accelerations_of_left_forces(config):
 
 
 def test_longitudinal_force_uses_the_wheel_acceleration_not_its_speed():
-    fx = longitudinal_forces([300.0] * 4, [10.0, 0.0, -10.0, 0.0], 1.5, 0.36)
-    np.testing.assert_allclose(fx, [(300 - 15) / 0.36, 300 / 0.36, (300 + 15) / 0.36, 300 / 0.36])
+    fx = longitudinal_forces([300.0] * 4, [10.0, 0.0, -10.0, 0.0], 1.5, 0.36, [40.0, 40.0, 0.0, 0.0])
+    np.testing.assert_allclose(fx, [(300 - 15) / 0.36 - 40, 300 / 0.36 - 40, (300 + 15) / 0.36, 300 / 0.36])
 
 
 def test_wheel_acceleration_recovers_a_ramp_and_ignores_one_outlier():
@@ -90,16 +90,17 @@ def test_the_wheel_acceleration_s_noise_gain_is_the_scatter_of_its_slopes_of_whi
 
 
 def test_eq4_reproduces_the_plants_longitudinal_force(dlc_run, config):
-    """Fx = (T - J dw/dt) / R against the simulator's tire force; the difference is its rolling resistance."""
+    """Fx = (T - J dw/dt) / R - f_r Fz against the simulator's tire force (its rolling resistance is the config's
+    default, 0.012)."""
     _, _, sim = dlc_run
     p = config.vehicle
     truth = sim.truth
     t = truth["t"]
     for w in ("fl", "fr", "rl", "rr"):
         omega, torque = truth[f"w_{w}"], truth[f"torque_{w}"]
-        fx = longitudinal_forces(torque[1:-1], np.gradient(omega, t)[1:-1], p.wheel_inertia, p.wheel_radius)
-        rolling = 0.012 * truth[f"fz_{w}"][1:-1]
-        assert np.median(np.abs(fx - rolling - truth[f"fx_{w}"][1:-1])) < 30.0
+        fx = longitudinal_forces(torque[1:-1], np.gradient(omega, t)[1:-1], p.wheel_inertia, p.wheel_radius,
+                                 p.tire.rolling_resistance * truth[f"fz_{w}"][1:-1])
+        assert np.median(np.abs(fx - truth[f"fx_{w}"][1:-1])) < 30.0
 
 
 def left_turn(model, X, u, seconds=3.0):

@@ -85,8 +85,8 @@ def tire_usage(torques, loads, wheel_radius: float, rolling_resistance: float) -
     """Per wheel ``T / (R Fz) - f_r``: the share of its load a wheel's motor torque asks of its tire, less the
     rolling moment's share ``f_r`` (``vehicle.tire.rolling_resistance``), which turns no tire force and so makes no
     slip (a wheel rolling forward; loads floored at 1 N). Without it a cruising car's slip-free speed was its
-    rolling resistance's slip too low: on the simulator's dry double lane change at 80 km/h the reference speed
-    was 0.026 m/s slow on average (RMSE 0.028), 0.014 with it."""
+    rolling resistance's slip too low: on the simulator's dry double lane change at 80 km/h dici-gfckf's reference
+    speed was 0.026 m/s slow on average (RMSE 0.028); with it 0.007 (RMSE 0.014)."""
     return [torque / (wheel_radius * max(load, 1.0)) - rolling_resistance for torque, load in zip(torques, loads)]
 
 

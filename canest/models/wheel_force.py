@@ -98,7 +98,7 @@ class WheelAcceleration:
 
 
 def longitudinal_forces(torque, wheel_acceleration, wheel_inertia: float, wheel_radius: float,
-                        rolling=0.0) -> np.ndarray:
+                        rolling) -> np.ndarray:
     """Eq 4 corrected: ``Fx = (T - J dw/dt) / R - f_r Fz`` per wheel, N; ``rolling``: ``f_r Fz`` per wheel (N), the
     rolling moment's share of the torque, which no tire force carries (:class:`canest.params.TireModelParams`)."""
     return (np.asarray(torque, dtype=float) - wheel_inertia * np.asarray(wheel_acceleration)) / wheel_radius - rolling
