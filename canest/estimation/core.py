@@ -49,7 +49,7 @@ from canest.estimation.derived_ax import derived_ax
 from canest.estimation.estimate import OUTPUT_STATES, Estimate
 from canest.estimation.gyro_hold import GyroHold
 from canest.estimation.inputs import WHEEL_SPEEDS, TickInputs
-from canest.estimation.judge import DIVERGENCE_NIS, StateJudge
+from canest.estimation.judge import DIVERGENCE_NIS, StateJudge, steered_wheels_std
 from canest.estimation.measured_noise import MeasuredNoise
 from canest.estimation.reference_speed import TORQUES, ReferenceSpeed, tick_usage
 from canest.estimation.steering_zero import steering_zero
@@ -446,7 +446,7 @@ class Estimator:
         index = {"yaw_rate": self.yaw, "vx": self.vx, "beta": self.beta}
         vx, beta = x[self.vx], x[self.beta]
         reference = self.reference_speed  # vx is measured unless the reference integrated ax this tick
-        std = np.sqrt(np.maximum(np.diag(self.filter.covariance), 0.0))
+        std = covariance_std = np.sqrt(np.maximum(np.diag(self.filter.covariance), 0.0))
         rear_slip = None if self.judge.linear_tires else self._rear_slip(x)  # linear tires: the ay term
         offset_std = self.judge.sideslip_offset_std()  # a learned ay offset not applied: no model's Q holds it
         beta_model_std = math.hypot(self.judge.sideslip_model_std(vx * x[self.yaw], rear_slip), offset_std,
@@ -462,6 +462,9 @@ class Estimator:
                                self._gyro_noise(inputs), reference.integration_std(t),
                                self.integrates_ax and reference.wheels_t == t, gap, vx,
                                beta_model_std if carried else 0.0)
+        beyond_covariance = math.sqrt(max(std[self.beta] ** 2 - covariance_std[self.beta] ** 2, 0.0))
+        std[self.vx] = math.hypot(std[self.vx], steered_wheels_std(
+            self._road_wheel_angle(inputs), self.judge.lateral_velocity_std(vx, beta, beyond_covariance)))
         values = {
             "vx": vx, "vy": vx * math.tan(beta), "beta": beta, "yaw_rate": x[self.yaw],
             "vx_std": std[self.vx], "vy_std": math.hypot(vx * std[self.beta] / math.cos(beta) ** 2,

@@ -367,15 +367,17 @@ class LateralDrift:
         self.known = None  # (kinematic, model) lateral velocity when the sideslip was last known
         self.drift = 0.0
         self.spread = 0.0
+        self.mismatch = 0.0  # m/s, ``e`` of the last update: 0 while the sideslip is known
 
     def update(self, ay: float, yaw_rate: float, vx: float, beta: float, vx_measured: bool,
                sideslip_known: bool, lateral_std: float = 0.0) -> float:
-        """The drift bound ``|integral(r e)|`` (m/s); :attr:`spread` grows by ``|r| lateral_std dt`` (m/s)."""
+        """The drift bound ``|integral(r e)|`` (m/s); :attr:`spread` grows by ``|r| lateral_std dt`` (m/s);
+        :attr:`mismatch` is this tick's ``e``."""
         self.kinematic += (ay - yaw_rate * vx) * self.dt
         model = vx * math.tan(beta)
         if sideslip_known or self.known is None:
             self.known = (self.kinematic, model)
-        mismatch = (self.kinematic - self.known[0]) - (model - self.known[1])
-        self.drift = 0.0 if vx_measured else self.drift + yaw_rate * mismatch * self.dt
+        self.mismatch = (self.kinematic - self.known[0]) - (model - self.known[1])
+        self.drift = 0.0 if vx_measured else self.drift + yaw_rate * self.mismatch * self.dt
         self.spread = 0.0 if vx_measured else self.spread + abs(yaw_rate) * lateral_std * self.dt
         return abs(self.drift)
