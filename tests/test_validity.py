@@ -4,6 +4,7 @@ import math
 import cantools
 import numpy as np
 import pytest
+import scipy.optimize
 from scipy.stats import truncnorm
 
 from canest.apps.replay import replay
@@ -12,7 +13,7 @@ from canest.codec.encode import EstimateEncoder
 from canest.estimation import validity
 from canest.estimation.core import INTEGRATED_NOISE_SPAN
 from canest.estimation.measured_noise import MeasuredNoise
-from canest.estimation.judge import StateJudge
+from canest.estimation.judge import StateJudge, steered_wheels_std
 from canest.estimation.estimate import CAUSES, Estimate
 from canest.filters.parameters import truncated
 from canest.models.single_track import SingleTrackModel
@@ -127,6 +128,21 @@ def test_the_sideslip_model_error_is_held_after_a_bend_and_fades(config):
     assert judge.sideslip_model_std(0.0, 0.0) == pytest.approx(fading)
     judge.reset()
     assert judge.sideslip_model_std(0.0) == 0.0
+
+
+@pytest.mark.parametrize("delta_deg", [-6.0, 2.8, 15.0])
+def test_the_steered_wheels_read_vx_off_by_tan_half_delta_per_lateral_velocity_error(config, delta_deg):
+    """``steered_wheels_std`` against the model's own wheel-speed measurement: the vx that keeps the wheels' mean
+    speed while vy is off by 0.1 m/s (the sideslip moved at the same yaw rate) differs by ``tan(delta/2)`` of it."""
+    model, delta, vx, yaw_rate, error = SingleTrackModel(config.vehicle), math.radians(delta_deg), 20.0, 0.2, 0.1
+    u = np.array([delta, 0.0, 1.0])
+
+    def wheels(speed, vy):
+        return model.measure(np.array([[yaw_rate, math.atan2(vy, speed), speed]]), u)[0, 2]
+
+    vy = -0.5
+    moved = scipy.optimize.brentq(lambda speed: wheels(speed, vy + error) - wheels(vx, vy), vx - 1.0, vx + 1.0)
+    assert abs(moved - vx) == pytest.approx(steered_wheels_std(delta, error), rel=1e-3)
 
 
 def test_lateral_drift_bounds_vx_from_a_lateral_velocity_the_model_misses():
