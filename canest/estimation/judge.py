@@ -45,7 +45,7 @@ class StateJudge:
         # :meth:`_lateral_cause`); the others are judged by the linear regime
         self.regime = None if getattr(model, "parameters", 0) else validity.LinearRegime(vehicle, dt)
         self.kinematic = validity.KinematicCheck(dt)
-        self.lateral_drift = validity.LateralDrift(dt)
+        self.lateral_drift = validity.LateralDrift(dt, ay_noise)
         self.sideslip_known = False  # the sideslip was valid on the last tick
         self.reference_gap = FadingMaximum(dt, validity.HOLD)  # m/s, vx's from the reference (:meth:`widen`)
         # |v r| (m/s^2), or a tire curve's rear slip angle (rad), held (:meth:`sideslip_model_std`)
@@ -147,9 +147,10 @@ class StateJudge:
     def lateral_velocity_std(self, vx: float, beta: float, beta_std: float) -> float:
         """The lateral velocity's error (m/s) beside the filter's covariance: ``beta_std`` (rad, the published std's
         part beyond the covariance's) as vy's, ``vx / cos(beta)^2`` per rad, and, in quadrature, where the
-        sideslip is not known, the kinematic lateral velocity's change less the model's since it last was
-        (:class:`canest.estimation.validity.LateralDrift`): its published std does not bound it then."""
-        return math.hypot(vx * beta_std / math.cos(beta) ** 2, self.lateral_drift.mismatch)
+        sideslip is not known, the kinematic lateral velocity's recent change less the model's beyond what the
+        admitted ay offset explains (:attr:`canest.estimation.validity.LateralDrift.unexplained`): its published
+        std does not bound it then."""
+        return math.hypot(vx * beta_std / math.cos(beta) ** 2, self.lateral_drift.unexplained)
 
     def use_kinematic_offsets(self, ay: float, yaw_rate: float) -> None:
         """Offsets still in the inputs' ay and yaw rate that the kinematic identity ``ay - c = v (r - b) + dvy/dt``
