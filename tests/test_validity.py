@@ -179,6 +179,24 @@ def test_a_filter_reset_keeps_the_cars_lateral_velocity_where_the_model_last_kne
     assert drift.update(vx * yaw_rate, yaw_rate, vx, 0.0, False, False) == pytest.approx(yaw_rate * 2.0 * dt, rel=0.02)
 
 
+def test_the_unexplained_lateral_velocity_is_what_the_admitted_ay_offset_cannot_explain():
+    """While the sideslip is unknown, a slide the model misses is the lateral velocity's error; an ay offset within
+    the configured noise integrates alike but is no error of the car's: only the excess counts, however long."""
+    dt, vx, yaw_rate, ay_bias = 0.01, 20.0, 0.2, 0.1
+    drift = validity.LateralDrift(dt, ay_bias)
+    drift.update(vx * yaw_rate, yaw_rate, vx, 0.0, True, True)  # the sideslip known (0)
+    for _ in range(6000):  # a minute unknown with the ay offset the config admits: nothing unexplained
+        drift.update(vx * yaw_rate + ay_bias, yaw_rate, vx, 0.0, True, False)
+    assert drift.mismatch == pytest.approx(ay_bias * 60.0, rel=1e-6)
+    assert drift.unexplained == pytest.approx(0.0, abs=1e-9)
+    drift.update(vx * yaw_rate, yaw_rate, vx, 0.0, True, True)  # known again
+    for _ in range(100):  # the car slides to vy -2 m/s in 1 s; the model keeps vy -0.5
+        drift.update(vx * yaw_rate - 2.0, yaw_rate, vx, -0.5 / vx, True, False)
+    assert drift.unexplained == pytest.approx(1.5 - ay_bias * 1.0, rel=0.02)
+    drift.update(vx * yaw_rate, yaw_rate, vx, -0.5 / vx, True, True)
+    assert drift.unexplained == 0.0
+
+
 def test_lateral_drift_spreads_vx_by_the_known_sideslips_own_uncertainty():
     """A sideslip known within its std still moves an integrated vx: at r times std(vy), linearly."""
     dt, vx, yaw_rate, lateral_std = 0.01, 20.0, -0.3, 0.3
