@@ -147,7 +147,7 @@ class StateJudge:
     def lateral_velocity_std(self, vx: float, beta: float, beta_std: float) -> float:
         """The lateral velocity's error (m/s) beside the filter's covariance: ``beta_std`` (rad, the published std's
         part beyond the covariance's) as vy's, ``vx / cos(beta)^2`` per rad, and, in quadrature, where the
-        sideslip is not known, the kinematic lateral velocity's recent change less the model's beyond what the
+        sideslip is not known, the kinematic lateral velocity's change since it was less the model's, beyond what the
         admitted ay offset explains (:attr:`canest.estimation.validity.LateralDrift.unexplained`): its published
         std does not bound it then."""
         return math.hypot(vx * beta_std / math.cos(beta) ** 2, self.lateral_drift.unexplained)
