@@ -49,7 +49,7 @@ from canest.estimation.derived_ax import derived_ax
 from canest.estimation.estimate import OUTPUT_STATES, Estimate
 from canest.estimation.gyro_hold import GyroHold
 from canest.estimation.inputs import WHEEL_SPEEDS, TickInputs
-from canest.estimation.judge import DIVERGENCE_NIS, StateJudge, steered_wheels_std
+from canest.estimation.judge import DIVERGENCE_NIS, StateJudge, lateral_velocity_of, steered_wheels_std
 from canest.estimation.measured_noise import MeasuredNoise
 from canest.estimation.reference_speed import TORQUES, ReferenceSpeed, tick_usage
 from canest.estimation.steering_zero import steering_zero
@@ -471,19 +471,20 @@ class Estimator:
                                self._gyro_noise(inputs), reference.integration_std(t),
                                self.integrates_ax and reference.wheels_t == t, gap, vx,
                                beta_model_std if carried else 0.0)
+        delta = self._road_wheel_angle(inputs)
         beyond_covariance = math.sqrt(max(std[self.beta] ** 2 - covariance_std[self.beta] ** 2, 0.0))
         std[self.vx] = math.hypot(std[self.vx], steered_wheels_std(
-            self._road_wheel_angle(inputs), self.judge.lateral_velocity_std(vx, beta, beyond_covariance)))
+            delta, self.judge.lateral_velocity_std(vx, beta, beyond_covariance)))
         values = {
             "vx": vx, "vy": vx * math.tan(beta), "beta": beta, "yaw_rate": x[self.yaw],
-            "vx_std": std[self.vx], "vy_std": math.hypot(vx * std[self.beta] / math.cos(beta) ** 2,
+            "vx_std": std[self.vx], "vy_std": math.hypot(lateral_velocity_of(vx, beta, std[self.beta]),
                                                          math.tan(beta) * std[self.vx]),
             "beta_std": std[self.beta], "yaw_rate_std": std[self.yaw],
         }
         lateral = {"low_speed": mode == "low_speed", "after_reset": mode == "degraded" and t < self.suspect_until,
                    "zero_learned": self.steering_zero.learned, "ay_noise_known": self._ay_noise_known(inputs),
                    "lateral_ok": lateral_ok, "beta": beta, "vx": vx,
-                   "delta": self._road_wheel_angle(inputs), "ay_density": self._ay_density(inputs),
+                   "delta": delta, "ay_density": self._ay_density(inputs),
                    "at_limit_of_unbounded_friction": self._at_limit_of_unbounded_friction(),
                    "frictions_pressed": self._frictions_pressed()}
         walk_unknown = self.ax_noise.density is None and reference.last_t == t

@@ -33,6 +33,12 @@ def steered_wheels_std(delta: float, vy_std: float) -> float:
     return abs(math.tan(0.5 * delta) * vy_std)
 
 
+def lateral_velocity_of(vx: float, beta: float, beta_std: float) -> float:
+    """A sideslip std ``beta_std`` (rad) as the lateral velocity's (m/s): ``vy = vx tan(beta)`` moves by
+    ``vx / cos(beta)^2`` per rad."""
+    return abs(vx) * beta_std / math.cos(beta) ** 2
+
+
 class StateJudge:
     def __init__(self, model, vehicle, dt: float, gyro_bias_std: float = 0.0, ay_noise: float = 0.0):
         self.model = model
@@ -136,7 +142,7 @@ class StateJudge:
             return 0.0
         ay, yaw_rate = self._kinematic_inputs(inputs)
         return self.lateral_drift.update(ay, yaw_rate, vx, beta, vx_measured, self.sideslip_known,
-                                         abs(vx) * beta_std / math.cos(beta) ** 2)
+                                         lateral_velocity_of(vx, beta, beta_std))
 
     def lateral_std(self, drift: float) -> float:
         """The vx error (m/s) a lateral velocity the model misses may have caused since the wheels last measured vx:
@@ -146,11 +152,11 @@ class StateJudge:
 
     def lateral_velocity_std(self, vx: float, beta: float, beta_std: float) -> float:
         """The lateral velocity's error (m/s) beside the filter's covariance: ``beta_std`` (rad, the published std's
-        part beyond the covariance's) as vy's, ``vx / cos(beta)^2`` per rad, and, in quadrature, where the
+        part beyond the covariance's) as vy's (:func:`lateral_velocity_of`), and, in quadrature, where the
         sideslip is not known, the kinematic lateral velocity's change since it was less the model's, beyond what the
         admitted ay offset explains (:attr:`canest.estimation.validity.LateralDrift.unexplained`): its published
         std does not bound it then."""
-        return math.hypot(vx * beta_std / math.cos(beta) ** 2, self.lateral_drift.unexplained)
+        return math.hypot(lateral_velocity_of(vx, beta, beta_std), self.lateral_drift.unexplained)
 
     def use_kinematic_offsets(self, ay: float, yaw_rate: float) -> None:
         """Offsets still in the inputs' ay and yaw rate that the kinematic identity ``ay - c = v (r - b) + dvy/dt``
