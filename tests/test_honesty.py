@@ -36,12 +36,30 @@ def replayed(case, name, workdir):
 
 
 @pytest.fixture(scope="module")
-def scores(tmp_path_factory):
+def results(tmp_path_factory):
     args = honesty.parse_args(["--small"])
     results = honesty.grid(CONFIG, FILTERS, honesty.cases_of(args), tmp_path_factory.mktemp("honesty"),
                            report=lambda text: None)
     assert not any(r.get("failed") for r in results)
+    return results
+
+
+@pytest.fixture(scope="module")
+def scores(results):
     return honesty.pooled(results, FILTERS)
+
+
+def test_the_per_case_rows_are_the_drives_that_make_the_pooled_score(results, scores):
+    """``--per-case``: one row per drive and filter, whose ticks add up to the pooled score's and whose worst
+    error is the pool's."""
+    rows = honesty.per_case(results, FILTERS, "vx")
+    assert [(key, name) for key, name, _ in rows] == [(r["case"].key, name) for r in results for name in FILTERS]
+    for name in FILTERS:
+        own = [score for _, row_name, score in rows if row_name == name]
+        assert sum(score.samples for score in own) == scores[name]["vx"].samples
+        assert max(score.max_error for score in own) == scores[name]["vx"].max_error
+    table = honesty.per_case_markdown(rows)
+    assert len(table.splitlines()) == 2 + len(rows) and results[0]["case"].key in table
 
 
 @pytest.mark.parametrize("name", FILTERS)
@@ -378,3 +396,10 @@ def test_a_car_without_motor_torques_on_a_hill_integrates_ax_less_the_grade(tmp_
     result = honesty.run_case(ROOT / "configs" / "hard_drive.yaml", ["ckf"], case, tmp_path)
     score = honesty.summarize("vx", result["sums"]["ckf"]["vx"])
     assert score.valid > 0.9 and score.vbw == 0.0 and score.rmse < 0.025, score
+
+
+def test_per_case_names_the_states_it_knows_when_given_one_it_does_not(capsys, tmp_path):
+    assert honesty.main(["--small", "--per-case", "speed", "--workdir", str(tmp_path)]) == 2
+    error = capsys.readouterr().err
+    assert "'speed'" in error and "vx" in error and "mu_fl" in error
+    assert not any(tmp_path.iterdir())  # nothing simulated

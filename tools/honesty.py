@@ -7,6 +7,7 @@
     python tools/honesty.py --filters ckf,jckf --vibration 1     # the IMU vibrating as on a real car
     python tools/honesty.py --filters all --seeds 3 --car drawn   # each seed a car as wrong as its config admits
     python tools/honesty.py --filters all --grade 6               # uphill at 6 %
+    python tools/honesty.py --filters ckf --per-case vx            # and vx per drive: which cases make the pool
 
 For every case of maneuvers x speeds x frictions x noise seeds it simulates
 one drive (cached in ``--workdir``: tools/drive_cache.py), replays it with every filter (each on
@@ -138,6 +139,21 @@ def pooled(results, filters) -> dict:
     return out
 
 
+def per_case(results, filters, state: str) -> list:
+    """(case key, filter, Score) of ``state`` on every simulated case: which drives make a pooled number."""
+    return [(r["case"].key, name, summarize(state, r["sums"][name][state]))
+            for r in results if not r.get("failed") for name in filters if state in r["sums"][name]]
+
+
+def per_case_markdown(rows) -> str:
+    lines = ["| case | filter | RMSE | valid | <=2 std | NEES | valid but wrong | largest error |",
+             "|---|---|---|---|---|---|---|---|"]
+    for key, name, s in rows:
+        lines.append(f"| {key} | {name} | {s.rmse:.3g} | {_pct(s.valid)} | {_pct(s.cov2)} | {s.nees:.3g} | "
+                     f"{_pct(s.vbw)} | {s.max_error:.3g} |")
+    return "\n".join(lines)
+
+
 def markdown(scores: dict) -> str:
     lines = ["| filter | state | unit | RMSE | valid | <=1 std | <=2 std | <=3 std | NEES | valid but wrong | wrong sign |",
              "|---|---|---|---|---|---|---|---|---|---|---|"]
@@ -183,6 +199,9 @@ def parse_args(argv=None):
     p.add_argument("--workdir", default="honesty-work", help="cache of simulated drives, per config and simulator source (default ./honesty-work)")
     p.add_argument("--jobs", type=int, default=1, help="cases in parallel processes (default 1)")
     p.add_argument("--json", action="store_true", help="print JSON instead of the markdown table")
+    p.add_argument("--per-case", metavar="STATE",
+                   help="also print STATE (vx, yaw_rate, beta, fy_fl, mu_fl, ...) per case and filter: which drives "
+                        "make a pooled number (JSON: under the key 'per_case')")
     p.add_argument("--small", action="store_true", help="quick subset: sine, step; mu 0.35, 0.85; 1 seed; 4 s")
     args = p.parse_args(argv)
     if args.small:
@@ -199,19 +218,27 @@ def main(argv=None) -> int:
     except CanestError as exc:
         print(exc, file=sys.stderr)
         return 2
+    if args.per_case and args.per_case not in STATES:
+        print(f"--per-case: no published state {args.per_case!r} (one of {', '.join(STATES)})", file=sys.stderr)
+        return 2
     workdir = folder(Path(args.workdir), config, loaded.input_dbc)
     cases = cases_of(args)
     started = time.perf_counter()
     results = grid(config, filters, cases, workdir, args.jobs, report=lambda text: print(text, file=sys.stderr))
     scores = pooled(results, filters)
     failed = [r["case"].key for r in results if r.get("failed")]
+    rows = per_case(results, filters, args.per_case) if args.per_case else []
     if args.json:
-        print(json.dumps({name: {s: dataclasses.asdict(score) for s, score in states.items()}
-                          for name, states in scores.items()}, indent=1))
+        out = {name: {s: dataclasses.asdict(score) for s, score in states.items()} for name, states in scores.items()}
+        if args.per_case:
+            out["per_case"] = [{"case": key, "filter": name, **dataclasses.asdict(score)} for key, name, score in rows]
+        print(json.dumps(out, indent=1))
     else:
         print(f"{len(cases) - len(failed)} cases x {len(filters)} filters in {time.perf_counter() - started:.0f} s"
               + (f"; not simulated (the plant spun to rest): {', '.join(failed)}" if failed else ""))
         print(markdown(scores))
+        if args.per_case:
+            print(f"\n{args.per_case} per case:\n" + per_case_markdown(rows))
     return 0
 
 
