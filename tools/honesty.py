@@ -145,24 +145,29 @@ def per_case(results, filters, state: str) -> list:
             for r in results if not r.get("failed") for name in filters if state in r["sums"][name]]
 
 
+SCORE_COLUMNS = ("RMSE", "valid", "<=1 std", "<=2 std", "<=3 std", "NEES", "valid but wrong", "wrong sign")
+
+
+def _table(columns, rows) -> str:
+    """A markdown table of ``columns`` (labels) and ``rows`` (lists of cell texts)."""
+    return "\n".join([f"| {' | '.join(columns)} |", "|" + "---|" * len(columns)] +
+                      [f"| {' | '.join(row)} |" for row in rows])
+
+
+def _score_cells(s) -> list:
+    """A Score's cells under :data:`SCORE_COLUMNS`."""
+    return [f"{s.rmse:.3g}", _pct(s.valid), _pct(s.cov1), _pct(s.cov2), _pct(s.cov3), f"{s.nees:.3g}", _pct(s.vbw),
+            str(s.wrong_sign) if s.state == "yaw_rate" else ""]
+
+
 def per_case_markdown(rows) -> str:
-    lines = ["| case | filter | RMSE | valid | <=2 std | NEES | valid but wrong | largest error |",
-             "|---|---|---|---|---|---|---|---|"]
-    for key, name, s in rows:
-        lines.append(f"| {key} | {name} | {s.rmse:.3g} | {_pct(s.valid)} | {_pct(s.cov2)} | {s.nees:.3g} | "
-                     f"{_pct(s.vbw)} | {s.max_error:.3g} |")
-    return "\n".join(lines)
+    return _table(("case", "filter", *SCORE_COLUMNS, "largest error"),
+                  [[key, name, *_score_cells(s), f"{s.max_error:.3g}"] for key, name, s in rows])
 
 
 def markdown(scores: dict) -> str:
-    lines = ["| filter | state | unit | RMSE | valid | <=1 std | <=2 std | <=3 std | NEES | valid but wrong | wrong sign |",
-             "|---|---|---|---|---|---|---|---|---|---|---|"]
-    for name, states in scores.items():
-        for s in states.values():
-            lines.append(f"| {name} | {s.state} | {s.unit} | {s.rmse:.3g} | {_pct(s.valid)} | {_pct(s.cov1)} | "
-                         f"{_pct(s.cov2)} | {_pct(s.cov3)} | {s.nees:.3g} | {_pct(s.vbw)} | "
-                         f"{s.wrong_sign if s.state == 'yaw_rate' else ''} |")
-    return "\n".join(lines)
+    return _table(("filter", "state", "unit", *SCORE_COLUMNS),
+                  [[name, s.state, s.unit, *_score_cells(s)] for name, states in scores.items() for s in states.values()])
 
 
 def _pct(share: float) -> str:
