@@ -24,8 +24,10 @@ CALIBRATED = ("ckf", "mcsckf", "svd-fckf", "jckf")  # standard deviations coveri
 VIBRATING = ("ckf", "dekf", "jckf", "dckf")  # replayed on the small grid with the IMU vibrating
 # jckf's sideslip holds half the sideslip its rear tires' saturation makes until the car shows a tire's limit (the
 # first seconds of these 4 s drives; README "How far to trust the output"): NEES 0.54 -> 0.44 here; 0.38 since the
-# rolling moment is no tire force (the estimate nearer the truth, its std the same: full grid RMSE 0.372 -> 0.361 deg)
-NEES_FLOOR = {("jckf", "beta"): 0.35}
+# rolling moment is no tire force (the estimate nearer the truth, its std the same: full grid RMSE 0.372 -> 0.361 deg);
+# 0.25 since the std takes the frictions' error near the tires' peak (`FrictionEstimator._friction_slip`): the exact
+# car's sine on 0.35 0.87 -> 0.32, for the drawn cars' sideslip valid but wrong 0.21 -> 0.00 % (README)
+NEES_FLOOR = {("jckf", "beta"): 0.2}
 
 
 def replayed(case, name, workdir):

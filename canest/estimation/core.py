@@ -390,6 +390,12 @@ class Estimator:
         frictions: :meth:`canest.estimation.two_track.FrictionEstimator._sideslip_saturation_std`)."""
         return 0.0
 
+    def _sideslip_friction_std(self) -> float:
+        """The sideslip's std (rad) from the frictions' error near the tires' peak (none for a model without
+        frictions: :meth:`canest.estimation.two_track.FrictionEstimator._friction_slip`). Published, and left out of
+        vx's lateral drift (:meth:`_publish`)."""
+        return 0.0
+
     def _rear_slip(self, x: np.ndarray) -> float:
         """The rear wheels' mean slip angle (rad) at the estimate ``x`` (they do not steer: any road wheel angle)."""
         vx = x[self.vx]
@@ -467,7 +473,8 @@ class Estimator:
         # r vy alike), and their difference tells nothing
         lateral_std = self.judge.lateral_std(drift)
         gap = 0.0 if self.integrates_ax else reference.disagreement(t, vx, lateral_std)
-        std = self.judge.widen(std, index, ratios, offset_std if carried else beta_model_std, lateral_std,
+        published_model_std = math.hypot(offset_std if carried else beta_model_std, self._sideslip_friction_std())
+        std = self.judge.widen(std, index, ratios, published_model_std, lateral_std,
                                self._gyro_noise(inputs), reference.integration_std(t),
                                self.integrates_ax and reference.wheels_t == t, gap, vx,
                                beta_model_std if carried else 0.0)

@@ -63,7 +63,11 @@ Published standard deviations get these terms beyond the filter's covariance:
   wrong as their config admits (``tools/honesty.py --car drawn``); for the
   friction models, while the car has shown no tire's limit, the term also
   holds half the sideslip their rear tires' saturation makes beyond linear tires
-  (:meth:`canest.models.two_track.TwoTrackModel.rear_saturation_slip`);
+  (:meth:`canest.models.two_track.TwoTrackModel.rear_saturation_slip`), and once it has shown one, the
+  rear slip angle's move when the frictions are one std off: near the peak a friction a little lower needs
+  the peak's slip angle for the same force, which the filter's linearization does not see
+  (:meth:`canest.estimation.two_track.FrictionEstimator._friction_slip`; published with the sideslip, left
+  out of vx's drift bound below);
 - the sideslip is never published more certain than its remembered mismatch
   with the kinematic sideslip (:class:`KinematicCheck`), and vx's std grows
   by ``|r|`` times the lateral velocity's std while the wheels do not measure
