@@ -194,7 +194,7 @@ def test_a_tires_stiffness_sensitivity_is_its_force_in_the_linear_range_and_zero
 
 
 def test_the_rear_axle_needs_another_slip_angle_at_another_friction_only_near_its_peak(config):
-    """``rear_axle_slip`` inverts the rear axle's curve: at the state's own frictions it gives the state's rear slip
+    """``rear_axle_slips`` inverts the rear axle's curve: at the state's own frictions it gives the state's rear slip
     angle (the sideslip, at zero yaw rate); in the linear range a fifth less friction needs the same one; at 93 %
     of the peak a fifth less friction cannot carry the force, and the answer is the lower curve's peak slip."""
     from canest.models.two_track import TwoTrackModel
@@ -205,12 +205,13 @@ def test_the_rear_axle_needs_another_slip_angle_at_another_friction_only_near_it
     def state(sideslip, friction):
         return np.array([0.0, sideslip, vx, *[vx / radius] * 4, *[friction] * 4])
 
-    linear = state(0.005, 0.9)
-    assert model.rear_axle_slip(linear, u, linear[two_track.MU]) == pytest.approx(0.005, abs=0.001)
-    assert model.rear_axle_slip(linear, u, 0.8 * linear[two_track.MU]) == pytest.approx(0.005, abs=0.001)
+    def slips(x):  # at the state's own frictions and a fifth lower
+        return model.rear_axle_slips(x, u, np.stack([x[two_track.MU], 0.8 * x[two_track.MU]]))
+
+    assert slips(state(0.005, 0.9)) == pytest.approx([0.005, 0.005], abs=0.001)
     near_peak = state(0.04, 0.35)
-    assert model.rear_axle_slip(near_peak, u, near_peak[two_track.MU]) == pytest.approx(0.04, abs=0.001)
-    lower = model.rear_axle_slip(near_peak, u, 0.8 * near_peak[two_track.MU])
+    own, lower = slips(near_peak)
+    assert own == pytest.approx(0.04, abs=0.001)
     assert lower > 1.3 * 0.04
     rear_force = lambda x: abs(model.forces(x[None, :], u)[1][0, 2:].sum())
     assert rear_force(state(lower, 0.28)) < rear_force(near_peak)  # the lower curve's peak falls short

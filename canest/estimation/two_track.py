@@ -285,7 +285,7 @@ class FrictionEstimator(Estimator):
         """The rear slip angle's std (rad) from the frictions' error: its moves when all four frictions are one
         covariance std lower and higher (never below ice), in root mean square (two sigma points of a Gaussian
         error; exact where the move is linear in it). Each move is the rear axle's force at the estimate carried
-        by tires of those frictions (:meth:`canest.models.two_track.TwoTrackModel.rear_axle_slip`), less the
+        by tires of those frictions (:meth:`canest.models.two_track.TwoTrackModel.rear_axle_slips`), less the
         estimate's slip angle; with the yaw rate measured the sideslip moves with it. Near the peak of the curve a
         friction a little lower needs the peak's slip angle, which the filter's linearization does not see: after
         a slide on 0.35, on a car with its rear stiffness drawn x1.3, jckf's rear frictions sat at 0.42 and 0.47
@@ -298,9 +298,9 @@ class FrictionEstimator(Estimator):
         frictions = x[two_track.MU]
         std = np.sqrt(np.maximum(np.diag(self.filter.P)[two_track.MU], 0.0))
         here = abs(self._rear_slip(x))
-        moves = [self.model.rear_axle_slip(x, u, np.maximum(frictions + sign * std, two_track.LOWEST_FRICTION)) - here
-                 for sign in (-1.0, 1.0)]
-        return math.sqrt(0.5 * (moves[0] ** 2 + moves[1] ** 2))
+        shifted = np.maximum(frictions + np.array([[-1.0], [1.0]]) * std, two_track.LOWEST_FRICTION)
+        moves = self.model.rear_axle_slips(x, u, shifted) - here
+        return float(np.sqrt(np.mean(moves**2)))
 
     def _judgeable(self) -> bool:
         """The estimate's sideslip is published and finite: at ``min_speed`` or above (else not published), every

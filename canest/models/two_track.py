@@ -46,7 +46,7 @@ MU_RANGE = (0.05, 1.5)  # the model clips friction to this range
 LOWEST_FRICTION = 0.1  # ice: the lowest friction a road is assumed to have
 HIGHEST_FRICTION = 1.3  # race tires on dry asphalt
 SENSITIVITY_STEP = 0.02  # mu step of the excitation finite difference
-AXLE_SLIP_GRID = np.linspace(0.0, 0.5, 1001)[:, None]  # rad: slip angles at which an axle's curve is drawn
+AXLE_SLIP_GRID = np.linspace(0.0, 0.5, 1001)  # rad: slip angles at which an axle's curve is drawn
 
 
 class TwoTrackModel:
@@ -85,21 +85,22 @@ class TwoTrackModel:
             return 0.0
         return abs(float(alpha[loaded].mean() - (fy[loaded] / stiffness[loaded]).mean()))
 
-    def rear_axle_slip(self, x: np.ndarray, u: np.ndarray, frictions: np.ndarray) -> float:
-        """The slip angle (rad, absolute) at which rear tires of the given ``frictions`` (4,; the rear two taken)
-        carry the rear axle's lateral force at the state ``x`` (n,): the first on the rising branch of the axle's
-        curve (each wheel's longitudinal force at ``x`` kept, through the friction circle), or the axle's peak's
-        where that force is beyond it. A lifted axle: 0."""
+    def rear_axle_slips(self, x: np.ndarray, u: np.ndarray, frictions: np.ndarray) -> np.ndarray:
+        """The slip angles (K,; rad, absolute) at which rear tires of each row of ``frictions`` (K, 4; the rear two
+        taken) carry the rear axle's lateral force at the state ``x`` (n,): the first on ``AXLE_SLIP_GRID`` on the
+        rising branch of the axle's curve (each wheel's longitudinal force at ``x`` kept, through the friction
+        circle), or the axle's peak's where that force is beyond it. A lifted axle: 0."""
         fx, fy, _, _, _, stiffness = self._tire_forces(x[None, :], u)
         rear = slice(2, 4)
-        peak = np.clip(frictions[rear], *MU_RANGE) * self.wheels.loads(u[AX], u[AY])[rear]
+        peak = np.clip(frictions[:, rear], *MU_RANGE) * self.wheels.loads(u[AX], u[AY])[rear]  # (K, 2)
         t = self.tire
-        curve = magic_formula(AXLE_SLIP_GRID, np.broadcast_to(stiffness, (1, 4))[0, rear], t.lateral_shape,
-                              t.lateral_curvature, peak)
+        curve = magic_formula(AXLE_SLIP_GRID[:, None, None], np.broadcast_to(stiffness, (1, 4))[0, rear],
+                              t.lateral_shape, t.lateral_curvature, peak)  # (G, K, 2)
         _, curve = friction_circle(np.broadcast_to(fx[0, rear], curve.shape), curve, peak)
-        axle = curve.sum(axis=1)
-        reached = np.flatnonzero(axle >= abs(float(fy[0, rear].sum())))
-        return float(AXLE_SLIP_GRID[reached[0] if reached.size else int(np.argmax(axle)), 0])
+        axle = curve.sum(axis=2)  # (G, K)
+        reached = axle >= abs(float(fy[0, rear].sum()))
+        first = np.where(reached.any(axis=0), np.argmax(reached, axis=0), np.argmax(axle, axis=0))
+        return AXLE_SLIP_GRID[first]
 
     def _tire_forces(self, X: np.ndarray, u: np.ndarray, stiffness_scale=1.0):
         """:meth:`forces`, and each wheel's slip angle (N, 4) and cornering stiffness (N, 4; (4,) for a scalar scale)."""
