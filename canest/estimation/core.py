@@ -473,6 +473,8 @@ class Estimator:
         # r vy alike), and their difference tells nothing
         lateral_std = self.judge.lateral_std(drift)
         gap = 0.0 if self.integrates_ax else reference.disagreement(t, vx, lateral_std)
+        # the frictions' error near the peak is published, not integrated into vx's drift bound: there it took jckf's
+        # vx valid share on the drawn cars 92.5 -> 84.7 % while vx stayed within 2 std on 99 % of its ticks either way
         published_model_std = math.hypot(offset_std if carried else beta_model_std, self._sideslip_friction_std())
         std = self.judge.widen(std, index, ratios, published_model_std, lateral_std,
                                self._gyro_noise(inputs), reference.integration_std(t),
