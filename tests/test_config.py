@@ -412,9 +412,10 @@ def test_check_names_the_factorization_the_filter_really_runs(name, tmp_path, ca
     assert "None" not in line and found["name"] == name
 
 
-def test_vx_from_ax_defaults_to_a_configs_own_vx_noise(tmp_path):
-    """``vx_from_ax`` (the noise of a vx that integrates ax) is the built-in 0.1 where a config sets neither, what a
-    config says, and a config's ``vx`` where it sets only that (written before the two were told apart)."""
+def test_vx_from_ax_and_from_wheel_states_default_to_a_configs_own_vx_noise(tmp_path):
+    """``vx_from_ax`` (the noise of a vx that integrates ax) and ``vx_from_wheel_states`` (of a vx held by wheel
+    speeds that are states) are the built-in 0.1 and 0.05 where a config sets none, what a config says, and a
+    config's ``vx`` where it sets only that (written before they were told apart)."""
     def noise(edit):
         return load_config(write_variant(tmp_path, edit)).estimator.process_noise
 
@@ -427,6 +428,6 @@ def test_vx_from_ax_defaults_to_a_configs_own_vx_noise(tmp_path):
     def both(data):
         data["estimator"]["process_noise"] = {"vx": 0.4, "vx_from_ax": 0.05}
 
-    assert noise(only_vx)["vx_from_ax"] == 0.4
-    assert noise(neither)["vx_from_ax"] == 0.1 and noise(neither)["vx"] == 0.3
-    assert (noise(both)["vx"], noise(both)["vx_from_ax"]) == (0.4, 0.05)
+    assert noise(only_vx)["vx_from_ax"] == noise(only_vx)["vx_from_wheel_states"] == 0.4
+    assert (noise(neither)["vx"], noise(neither)["vx_from_ax"], noise(neither)["vx_from_wheel_states"]) == (0.3, 0.1, 0.05)
+    assert (noise(both)["vx"], noise(both)["vx_from_ax"], noise(both)["vx_from_wheel_states"]) == (0.4, 0.05, 0.4)

@@ -177,11 +177,16 @@ def test_a_consistent_run_never_resets(config, dlc_run):
 
 def test_vx_process_noise_follows_what_drives_the_models_vx(config):
     """The single track integrates the measured ax (its vx noise is the accelerometer's, ``vx_from_ax``); the
-    two track's vx follows its tires' forces (``vx``)."""
+    tire-force model with motor torques follows its tires' forces (``vx``); the two track's vx is held by its wheel
+    speeds, states beside it (``vx_from_wheel_states``)."""
     noise = config.estimator.process_noise
-    assert noise["vx_from_ax"] < noise["vx"]
+    assert len({noise["vx"], noise["vx_from_ax"], noise["vx_from_wheel_states"]}) == 3
     single = make_estimator(config)
     assert single.Q[single.vx, single.vx] == pytest.approx(noise["vx_from_ax"] ** 2 * single.dt)
     two_track_config = dataclasses.replace(config.estimator, filter="jckf", model="two_track")
     two_track = make_estimator(dataclasses.replace(config, estimator=two_track_config))
-    assert two_track.Q[two_track.vx, two_track.vx] == pytest.approx(noise["vx"] ** 2 * two_track.dt)
+    assert two_track.Q[two_track.vx, two_track.vx] == pytest.approx(noise["vx_from_wheel_states"] ** 2 * two_track.dt)
+    tire_force = make_estimator(dataclasses.replace(config, estimator=dataclasses.replace(config.estimator,
+                                                                                          filter="dici-gfckf",
+                                                                                          model="tire_force")))
+    assert tire_force.Q[tire_force.vx, tire_force.vx] == pytest.approx(noise["vx"] ** 2 * tire_force.dt)

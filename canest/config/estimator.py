@@ -13,6 +13,7 @@ from canest.filters import FACTORIZATIONS, FILTERS, make_filter
 from canest.settings import EstimatorConfig
 from canest.yamldoc import Document, suggestion
 
+VX_NOISE_SPLIT = ("vx_from_ax", "vx_from_wheel_states")  # the vx noises of models not driven by vx's own forces
 NOISE_KEYS = {name: tuple(getattr(EstimatorConfig(), name)) for name in ("process_noise", "measurement_noise", "initial_std")}
 
 
@@ -28,9 +29,10 @@ def read_estimator(doc: Document) -> EstimatorConfig:
         doc.reject_unknown(key_path + (name,), given, keys)
         values[name] = {**getattr(defaults, name), **{k: doc.number(key_path + (name,), given, k, limits.NOISE)
                                                        for k in given}}
-        if name == "process_noise" and "vx" in given and "vx_from_ax" not in given:
-            # a vx noise written before vx_from_ax existed is meant for every model: it keeps that meaning
-            values[name]["vx_from_ax"] = values[name]["vx"]
+        if name == "process_noise" and "vx" in given:
+            # a vx noise written before vx_from_ax and vx_from_wheel_states existed is meant for every model: it
+            # keeps that meaning where they are not given
+            values[name].update({key: values[name]["vx"] for key in VX_NOISE_SPLIT if key not in given})
     compensation = _flag(doc, section, "latency_compensation", defaults.latency_compensation)
     online_calibration = _flag(doc, section, "online_calibration", defaults.online_calibration)
     state_file = _state_file(doc, section)

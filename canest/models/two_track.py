@@ -55,6 +55,9 @@ class TwoTrackModel:
     # the dual filter's parameter block: the last four states, within the frictions a road can have
     parameters = PARAMETERS  # the last states are the four frictions: bounded parameters of the filter
     parameter_bounds = (LOWEST_FRICTION, HIGHEST_FRICTION)
+    # vx is held by the four wheel speeds, states beside it, and what moves it beyond their tires' forces (drag,
+    # rolling resistance) is small: its own process noise (README "How far to trust the output", vx's std)
+    vx_noise_key = "vx_from_wheel_states"
 
     def __init__(self, vehicle: VehicleParams, tire: TireModelParams = TireModelParams()):
         self.tire = tire
