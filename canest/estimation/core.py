@@ -385,6 +385,12 @@ class Estimator:
         frictions."""
         return False
 
+    def _covariance_holds_stiffness_error(self) -> bool:
+        """The filter's covariance already holds what a cornering stiffness off by its uncertainty does to the
+        sideslip, which then takes no stiffness term (:func:`validity.sideslip_model_std`); only where frictions are
+        estimated in that covariance (:meth:`canest.estimation.two_track.FrictionEstimator._covariance_holds_stiffness_error`)."""
+        return False
+
     def _sideslip_saturation_std(self) -> float:
         """The sideslip's std (rad) from tire saturation the measurements have not shown (none for a model without
         frictions: :meth:`canest.estimation.two_track.FrictionEstimator._sideslip_saturation_std`)."""
@@ -462,10 +468,13 @@ class Estimator:
         vx, beta = x[self.vx], x[self.beta]
         reference = self.reference_speed  # vx is measured unless the reference integrated ax this tick
         std = covariance_std = np.sqrt(np.maximum(np.diag(self.filter.covariance), 0.0))
-        rear_slip = None if self.judge.linear_tires else self._rear_slip(x)  # linear tires: the ay term
+        if self._covariance_holds_stiffness_error():
+            stiffness_std = 0.0
+        else:
+            rear_slip = None if self.judge.linear_tires else self._rear_slip(x)  # linear tires: the ay term
+            stiffness_std = self.judge.sideslip_model_std(vx * x[self.yaw], rear_slip)
         offset_std = self.judge.sideslip_offset_std()  # a learned ay offset not applied: no model's Q holds it
-        beta_model_std = math.hypot(self.judge.sideslip_model_std(vx * x[self.yaw], rear_slip), offset_std,
-                                    self._sideslip_saturation_std())
+        beta_model_std = math.hypot(stiffness_std, offset_std, self._sideslip_saturation_std())
         drift = self.judge.drift(inputs, vx, beta, math.hypot(std[self.beta], beta_model_std),
                                  reference.last_t != t or reference.anchored_at == t)
         carried = self.covariance_has_tire_error and not self.low_speed  # the model's Q has the tire error

@@ -67,7 +67,9 @@ Published standard deviations get these terms beyond the filter's covariance:
   rear slip angle's move when the frictions are one std off: near the peak a friction a little lower needs
   the peak's slip angle for the same force, which the filter's linearization does not see
   (:meth:`canest.estimation.two_track.FrictionEstimator._friction_slip`; published with the sideslip, left
-  out of vx's drift bound below);
+  out of vx's drift bound below). The joint friction filter (jckf) takes no ``e |alpha_r|``: its covariance
+  holds the frictions, which bend the curves the sideslip rests on, and the stiffness's error with them
+  (:meth:`canest.estimation.two_track.FrictionEstimator._covariance_holds_stiffness_error`);
 - the sideslip is never published more certain than its remembered mismatch
   with the kinematic sideslip (:class:`KinematicCheck`), and vx's std grows
   by ``|r|`` times the lateral velocity's std while the wheels do not measure
