@@ -85,10 +85,12 @@ def test_the_published_std_covers_the_error(scores, name):
 def test_frictions_flagged_valid_are_right(scores):
     """jckf's frictions were valid but wrong on 1.8-4.3 % of the grid's ticks: plunging from the prior in a step
     steer on a dry road (0.90 -> 0.15 in 0.25 s, std 0.06), read from a stiffness the model lacks, or kept while
-    the car slid. The std now carries the stiffness's error and the range the estimate spanned over a second."""
+    the car slid. The std now carries the stiffness's error and the range the estimate spanned over a second.
+    Measured on low friction: valid on 6.9 % of these 4 s drives' ticks (13-17 % before the limit's yaw test
+    took the understeer gradient's std, which shows a limit later; the full grid's 24-28 -> 23-26 %)."""
     for wheel in ("fl", "fr", "rl", "rr"):
         score = scores["jckf"][f"mu_{wheel}"]
-        assert score.valid > 0.1 and score.vbw <= 0.001, (wheel, score)  # measured on low friction, never wrong
+        assert score.valid > 0.05 and score.vbw <= 0.001, (wheel, score)  # measured on low friction, never wrong
 
 
 @pytest.fixture(scope="module")

@@ -152,7 +152,7 @@ from canest.estimation.estimate import CAUSE_GROUPS as GROUPS, CAUSES
 from canest.estimation.lags import FirstOrderLag
 
 __all__ = ["CAUSES", "GROUPS", "Consistency", "Holds", "KinematicCheck", "LateralDrift", "LinearRegime", "inflation",
-           "judge", "innovation_terms", "sideslip_model_std", "sideslip_offset_std"]
+           "judge", "innovation_terms", "sideslip_model_std", "sideslip_offset_std", "understeer_std"]
 
 WINDOW = 50  # channel samples
 MIN_SAMPLES = 10  # before this many samples a channel's mean is not judged
@@ -252,21 +252,36 @@ def sideslip_offset_std(vehicle, ay_offset: float) -> float:
     return vehicle.mass * abs(ay_offset) / (vehicle.cornering_stiffness_front + vehicle.cornering_stiffness_rear)
 
 
-class LinearRegime:
-    """Whether the measured yaw rate follows the linear steady-state yaw rate of the steering (tires not saturated)."""
+def understeer_std(vehicle) -> float:
+    """The understeer gradient's std (s^2/m) when each axle's cornering stiffness is off by the relative
+    ``cornering_stiffness_uncertainty``, independently: ``K_us = (m / L) (b / C_f - a / C_r)`` moves by
+    ``(m / L) b / C_f`` per relative error of ``C_f`` and ``(m / L) a / C_r`` per one of ``C_r``."""
+    return vehicle.cornering_stiffness_uncertainty * vehicle.mass / vehicle.wheelbase * math.hypot(
+        vehicle.cg_to_rear / vehicle.cornering_stiffness_front, vehicle.cg_to_front / vehicle.cornering_stiffness_rear)
 
-    def __init__(self, vehicle, dt: float):
+
+class LinearRegime:
+    """Whether the measured yaw rate follows the linear steady-state yaw rate of the steering (tires not saturated).
+
+    ``understeer_std`` (s^2/m, :func:`understeer_std`; 0: the ESC band alone) widens the band by the share of the
+    reference that one std of the understeer gradient moves: ``r = vx delta / (L + K vx^2)`` moves by
+    ``r vx^2 / (L + K vx^2)`` per unit of ``K``, about a fifth of ``r`` per std at 80 km/h for the built-in car
+    (0.15 claimed)."""
+
+    def __init__(self, vehicle, dt: float, understeer_std: float = 0.0):
         self.wheelbase = vehicle.wheelbase
         self.understeer = vehicle.understeer_gradient
+        self.understeer_std = understeer_std
         self.reference = FirstOrderLag(dt, REGIME_LAG)
 
     def reset(self) -> None:
         self.reference.reset()
 
     def inside(self, delta: float, vx: float, yaw_rate: float) -> bool:
-        steady = vx * delta / max(self.wheelbase + self.understeer * vx * vx, 0.1 * self.wheelbase)
-        reference = self.reference.update(steady)
+        denominator = max(self.wheelbase + self.understeer * vx * vx, 0.1 * self.wheelbase)
+        reference = self.reference.update(vx * delta / denominator)
         absolute, relative = REGIME_TOLERANCE
+        relative += self.understeer_std * vx * vx / denominator
         return abs(yaw_rate - reference) <= absolute + relative * abs(reference)
 
 
