@@ -125,8 +125,7 @@ class EstimatorConfig:
     state_file: str | None = None  # where the online calibration is saved and reloaded from; None: not saved
     process_noise: dict = field(default_factory=lambda: {
         "yaw_rate": 0.05, "beta": 0.01, "vx": 0.3, "vx_from_ax": 0.1, "vx_from_wheel_states": 0.05,
-        "lateral_force": 300.0, "wheel_speed": 5.0,
-        "friction": 0.1})
+        "lateral_force": 300.0, "wheel_speed": 5.0, "friction": 0.1})
     measurement_noise: dict = field(default_factory=lambda: {
         "ay": 0.15, "yaw_rate": 0.005, "vx_wheel": 0.15, "ax": 0.15, "ax_2": 0.3, "ay_2": 0.3, "yaw_rate_2": 0.01,
         "wheel_speed": 0.1, "yaw_acceleration": 0.1, "vx_reference": 0.05})

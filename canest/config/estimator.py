@@ -13,7 +13,7 @@ from canest.filters import FACTORIZATIONS, FILTERS, make_filter
 from canest.settings import EstimatorConfig
 from canest.yamldoc import Document, suggestion
 
-VX_NOISE_SPLIT = ("vx_from_ax", "vx_from_wheel_states")  # the vx noises of models not driven by vx's own forces
+VX_NOISE_SPLIT = ("vx_from_ax", "vx_from_wheel_states")  # vx noises told apart from vx's: a config's vx alone sets them
 NOISE_KEYS = {name: tuple(getattr(EstimatorConfig(), name)) for name in ("process_noise", "measurement_noise", "initial_std")}
 
 
