@@ -66,6 +66,27 @@ def test_errors_are_one_clear_line_and_exit_2(tmp_path):
     assert result.returncode == 2 and "--mu" in result.stderr
 
 
+def test_simulate_gives_the_imu_a_real_car_s_vibration_on_request(tmp_path):
+    """``--vibration 1``: about one 10 ms step of ay in six beyond 2 m/s^2, as measured on a real drive
+    (:mod:`canest.sim.sensors`); without it the simulated ESC accelerometer steps far less."""
+    from canest.codec.decode import InputDecoder
+    from canest.config import DEFAULT_CONFIG, load_config
+
+    decoder = InputDecoder(load_config(DEFAULT_CONFIG))
+
+    def big_steps(scale):
+        log = tmp_path / f"vib{scale}.log"
+        canest("simulate", "-m", "step", "--duration", 3, "--vibration", scale, "-o", log, "--truth", tmp_path / "t.csv")
+        ay = [value for msg in can.LogReader(str(log)) for name, value in (decoder.decode(msg) or ()) if name == "ay"]
+        return np.mean(np.abs(np.diff(ay)) > 2.0), len(ay)
+
+    (vibrating, samples), (quiet, _) = big_steps(1), big_steps(0)
+    assert samples > 250 and 0.08 < vibrating < 0.35 and quiet == 0.0, (vibrating, quiet)
+    result = canest("simulate", "--vibration", "nan", "-o", tmp_path / "x.log", "--truth", tmp_path / "t.csv",
+                    check=False)
+    assert result.returncode == 2 and "--vibration: a scale from 0 to 10" in result.stderr
+
+
 def test_run_on_a_bus_that_does_not_exist_fails_cleanly():
     result = canest("run", "--interface", "socketcan", "--channel", "nosuchcan9", check=False)
     assert result.returncode == 2

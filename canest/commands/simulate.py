@@ -19,6 +19,7 @@ from canest.sim.simulate import simulate
 EPILOG = """examples:
   canest simulate --maneuver dlc --speed 80 --mu 0.85 --out drive.log --truth truth.csv
   canest simulate --maneuver sine --speed 80 --mu 0.35 --out sine.blf --truth sine.csv --outliers 0.02
+  canest simulate --maneuver step --vibration 1 --out rough.log --truth rough.csv   # an IMU on a real car's body
   canest simulate --maneuver step --mu 0.85,0.3,0.85,0.3 --out split.log --truth split.csv   # split mu: right side on ice
   canest simulate --maneuver sine --speed 60 --mu 0.85 --mu-jump 6:0.35 --out jump.log --truth jump.csv
   canest simulate --out - --truth truth.csv | canest replay - --csv est.csv    # candump text through a pipe
@@ -40,6 +41,7 @@ file is replaced, an input (config, DBC) never."""
 
 MIN_SPEED_KMH = 2.0  # the car starts at the target speed; the plant is valid from 0.5 m/s (1.8 km/h)
 MAX_SPEED_KMH = 300.0
+MAX_VIBRATION = 10.0  # times a real car's IMU vibration (canest.sim.sensors); at 10 ay's alone is 14 m/s^2, beyond any car
 
 
 def register(subparsers) -> None:
@@ -63,6 +65,9 @@ def register(subparsers) -> None:
     p.add_argument("--noise-scale", type=float, default=1.0, help="multiply every sensor noise and bias (default 1)")
     p.add_argument("--outliers", type=float, default=0.0,
                    help="probability per sample of a heavy-tailed (Student-t) outlier (default 0)")
+    p.add_argument("--vibration", type=float, default=0.0, metavar="SCALE",
+                   help="the IMU's body vibration (coloured noise) and road spikes, as a real car's at 1: about one "
+                        f"10 ms step of ay in six beyond 2 m/s^2; 0 to {MAX_VIBRATION:g} (default 0: none)")
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     p.add_argument("--start-time", type=float, default=0.0, help="timestamp of the first frame in s (default 0)")
     car = p.add_argument_group("the simulated car, where it differs from the config")
@@ -158,6 +163,8 @@ def run(args) -> int:
     mu_jump = parse_mu_jump(args.mu_jump)
     if not 0.0 <= args.outliers < 1.0:
         raise UsageError(f"--outliers: a probability per sample in [0, 1), got {args.outliers}")
+    if not 0.0 <= args.vibration <= MAX_VIBRATION:  # also refuses nan
+        raise UsageError(f"--vibration: a scale from 0 to {MAX_VIBRATION:g} (1: a real car's), got {args.vibration}")
     if not MIN_SPEED_KMH <= args.speed <= MAX_SPEED_KMH:  # also refuses nan
         raise UsageError(f"--speed: a target speed from {MIN_SPEED_KMH:g} to {MAX_SPEED_KMH:g} km/h, got {args.speed}")
     if args.duration is not None and not (math.isfinite(args.duration) and args.duration > 0):
@@ -177,7 +184,7 @@ def run(args) -> int:
                               amplitude_deg=args.amplitude, seed=args.seed, noise_scale=args.noise_scale,
                               outliers=args.outliers, start_time=args.start_time, channel=config.input_bus.channel,
                               progress=lambda f: bar.update(round(100 * f) - bar.n), mu_jump=mu_jump,
-                              mismatch=mismatch)
+                              mismatch=mismatch, vibration=args.vibration)
         for output, write in zip(outputs, (write_log, write_truth)):
             try:
                 write(result, output)
