@@ -6,12 +6,13 @@ in the list (README "How far to trust the output" has the full grid and the
 filters and states still outside the issue's targets).
 """
 import dataclasses
+import json
 import sys
 
 import numpy as np
 import pytest
 
-from canest.apps.evaluate import counts, read_table, valid_mask
+from canest.apps.evaluate import Score, counts, read_table, valid_mask
 from canest.config import load_config
 from canest.sim.mismatch import PlantMismatch, drawn_mismatch
 from tests.conftest import CONFIG, ROOT
@@ -409,3 +410,33 @@ def test_per_case_names_the_states_it_knows_when_given_one_it_does_not(capsys, t
     error = capsys.readouterr().err
     assert "'speed'" in error and "vx" in error and "mu_fl" in error
     assert not any(tmp_path.iterdir())  # nothing simulated
+
+
+def test_a_score_is_outside_the_targets_exactly_when_it_misses_one_and_says_which():
+    """The band's ends are inside; a state never valid is not judged; every miss is named."""
+    def score(**changes):
+        inside = dict(state="beta", unit="deg", rmse=0.3, mae=0.2, max_error=1.0, samples=100, valid=0.5,
+                      cov1=0.7, cov2=0.98, cov3=0.99, nees=0.5, vbw=0.001)
+        return Score(**{**inside, **changes})
+    scores = {"ckf": {"beta": score(), "vx": score(state="vx", cov2=0.90, nees=2.0),
+                      "yaw_rate": score(state="yaw_rate", valid=0.0, cov2=0.5, nees=9.0, vbw=0.5)},
+              "jckf": {"beta": score(cov2=0.981, nees=0.49), "vx": score(state="vx", vbw=0.0011),
+                       "yaw_rate": score(state="yaw_rate", wrong_sign=2)}}
+    assert honesty.outside_targets(scores) == [
+        ("jckf", "beta", ["within 2 std 98.1 %", "NEES 0.49"]), ("jckf", "vx", ["valid but wrong 0.11 %"]),
+        ("jckf", "yaw_rate", ["2 valid ticks of the wrong sign"])]
+    assert "- jckf beta: within 2 std 98.1 %, NEES 0.49" in honesty.outside_markdown(honesty.outside_targets(scores))
+    assert honesty.outside_markdown([]).endswith(": none")
+
+
+def test_check_fails_the_command_when_a_state_is_outside_the_targets(capsys, tmp_path):
+    """``--check``: exit status 1 exactly when the grid's JSON lists a state outside the targets, each listed one
+    missing a target by its own score."""
+    args = ["--small", "--filters", "ckf", "--workdir", str(tmp_path), "--json"]
+    assert honesty.main(args) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert honesty.main(args + ["--check"]) == (1 if out["outside"] else 0)
+    for row in out["outside"]:
+        s = out[row["filter"]][row["state"]]
+        assert (s["vbw"] > 0.001 or not 0.90 <= s["cov2"] <= 0.98 or not 0.5 <= s["nees"] <= 2.0
+                or s["wrong_sign"] > 0), row

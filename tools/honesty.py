@@ -8,6 +8,7 @@
     python tools/honesty.py --filters all --seeds 3 --car drawn   # each seed a car as wrong as its config admits
     python tools/honesty.py --filters all --grade 6               # uphill at 6 %
     python tools/honesty.py --filters ckf --per-case vx            # and vx per drive: which cases make the pool
+    python tools/honesty.py --small --check                        # exit status 1 if a state misses the targets
 
 For every case of maneuvers x speeds x frictions x noise seeds it simulates
 one drive (cached in ``--workdir``: tools/drive_cache.py), replays it with every filter (each on
@@ -145,6 +146,42 @@ def per_case(results, filters, state: str) -> list:
             for r in results if not r.get("failed") for name in filters if state in r["sums"][name]]
 
 
+# issue 15's targets for every filter and published state (README "How far to trust the output")
+VALID_BUT_WRONG_TARGET = 0.001  # share of the valid ticks at most
+WITHIN_TWO_STD_TARGET = (0.90, 0.98)  # share of the valid ticks, both ends included
+NEES_TARGET = (0.5, 2.0)  # mean NEES of the valid ticks
+
+
+def outside_targets(scores: dict) -> list:
+    """(filter, state, reasons) of every pooled score outside the targets; a state never valid is not judged."""
+    out = []
+    for name, states in scores.items():
+        for state, s in states.items():
+            if not s.valid > 0.0:
+                continue
+            reasons = []
+            if s.vbw > VALID_BUT_WRONG_TARGET:
+                reasons.append(f"valid but wrong {100 * s.vbw:.2f} %")
+            if not WITHIN_TWO_STD_TARGET[0] <= s.cov2 <= WITHIN_TWO_STD_TARGET[1]:
+                reasons.append(f"within 2 std {_pct(s.cov2)}")
+            if not NEES_TARGET[0] <= s.nees <= NEES_TARGET[1]:
+                reasons.append(f"NEES {s.nees:.3g}")
+            if s.wrong_sign:
+                reasons.append(f"{s.wrong_sign} valid ticks of the wrong sign")
+            if reasons:
+                out.append((name, state, reasons))
+    return out
+
+
+def outside_markdown(outside: list) -> str:
+    head = (f"Outside the targets (valid but wrong at most {_pct(VALID_BUT_WRONG_TARGET)}, within 2 std "
+            f"{_pct(WITHIN_TWO_STD_TARGET[0])} to {_pct(WITHIN_TWO_STD_TARGET[1])}, mean NEES {NEES_TARGET[0]:g} to "
+            f"{NEES_TARGET[1]:g}, no valid yaw rate of the wrong sign)")
+    if not outside:
+        return head + ": none"
+    return head + ":\n" + "\n".join(f"- {name} {state}: {', '.join(reasons)}" for name, state, reasons in outside)
+
+
 SCORE_COLUMNS = ("RMSE", "valid", "<=1 std", "<=2 std", "<=3 std", "NEES", "valid but wrong", "wrong sign")
 
 
@@ -207,6 +244,9 @@ def parse_args(argv=None):
     p.add_argument("--per-case", metavar="STATE",
                    help="also print STATE (vx, yaw_rate, beta, fy_fl, mu_fl, ...) per case and filter: which drives "
                         "make a pooled number (JSON: under the key 'per_case')")
+    p.add_argument("--check", action="store_true",
+                   help="exit with status 1 when a filter's state is outside the targets (listed below the table; "
+                        "JSON: under the key 'outside')")
     p.add_argument("--small", action="store_true", help="quick subset: sine, step; mu 0.35, 0.85; 1 seed; 4 s")
     args = p.parse_args(argv)
     if args.small:
@@ -233,8 +273,10 @@ def main(argv=None) -> int:
     scores = pooled(results, filters)
     failed = [r["case"].key for r in results if r.get("failed")]
     rows = per_case(results, filters, args.per_case) if args.per_case else []
+    outside = outside_targets(scores)
     if args.json:
         out = {name: {s: dataclasses.asdict(score) for s, score in states.items()} for name, states in scores.items()}
+        out["outside"] = [{"filter": name, "state": state, "reasons": reasons} for name, state, reasons in outside]
         if args.per_case:
             out["per_case"] = [{"case": key, "filter": name, **dataclasses.asdict(score)} for key, name, score in rows]
         print(json.dumps(out, indent=1))
@@ -242,9 +284,10 @@ def main(argv=None) -> int:
         print(f"{len(cases) - len(failed)} cases x {len(filters)} filters in {time.perf_counter() - started:.0f} s"
               + (f"; not simulated (the plant spun to rest): {', '.join(failed)}" if failed else ""))
         print(markdown(scores))
+        print("\n" + outside_markdown(outside))
         if args.per_case:
             print(f"\n{args.per_case} per case:\n" + per_case_markdown(rows))
-    return 0
+    return 1 if args.check and outside else 0
 
 
 if __name__ == "__main__":
