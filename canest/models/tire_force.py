@@ -42,9 +42,9 @@ import numpy as np
 
 from canest.params import VehicleParams
 from canest.models.integrate import rk4
-from canest.models.tire import TireModelParams, friction_circle, magic_formula, relaxation_rate
+from canest.models.tire import friction_circle, magic_formula, relaxation_rate
 from canest.models.wheel_force import DriveLayout
-from canest.models.wheels import MIN_WHEEL_SPEED, WheelGeometry
+from canest.models.wheels import MIN_WHEEL_SPEED, WheelModel
 
 STATE_NAMES = ("yaw_rate", "beta", "vx", "fy_fl", "fy_fr", "fy_rl", "fy_rr")
 MEASUREMENT_NAMES = ("ax", "ay", "yaw_rate", "vx_wheel", "ax_2", "ay_2", "yaw_rate_2")
@@ -58,19 +58,10 @@ LOW_SPEED_BETA_TAU = 0.5  # s
 LOW_SPEED_FORCE_TAU = 0.1  # s
 
 
-class TireForceModel:
+class TireForceModel(WheelModel):
     state_names = STATE_NAMES
     measurement_names = MEASUREMENT_NAMES
     sensor_sets = SENSOR_SETS
-
-    def __init__(self, vehicle: VehicleParams, tire: TireModelParams = TireModelParams()):
-        self.tire = tire
-        self.use_vehicle(vehicle)
-
-    def use_vehicle(self, vehicle: VehicleParams) -> None:
-        """Take ``vehicle``'s parameters (the online calibration's learned cornering stiffnesses)."""
-        self.vehicle = vehicle
-        self.wheels = WheelGeometry(vehicle)
 
     def longitudinal_forces(self, X: np.ndarray, u: np.ndarray) -> np.ndarray:
         """Fx (N, 4) of points X: the input's, from the motor torques (eq 4)."""

@@ -29,9 +29,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from canest.params import VehicleParams
-from canest.models.tire import TireModelParams, friction_circle, magic_formula, magic_formula_slope
-from canest.models.wheels import MIN_WHEEL_SPEED, WheelGeometry
+from canest.models.tire import friction_circle, magic_formula, magic_formula_slope
+from canest.models.wheels import MIN_WHEEL_SPEED, WheelModel
 
 STATE_NAMES = ("yaw_rate", "beta", "vx", "w_fl", "w_fr", "w_rl", "w_rr", "mu_fl", "mu_fr", "mu_rl", "mu_rr")
 MEASUREMENT_NAMES = ("ax", "ay", "yaw_rate", "yaw_acceleration", "vx_reference", "wheel_speed_fl", "wheel_speed_fr", "wheel_speed_rl", "wheel_speed_rr")
@@ -49,7 +48,7 @@ SENSITIVITY_STEP = 0.02  # mu step of the excitation finite difference
 AXLE_SLIP_GRID = np.linspace(0.0, 0.5, 1001)  # rad: slip angles at which an axle's curve is drawn
 
 
-class TwoTrackModel:
+class TwoTrackModel(WheelModel):
     state_names = STATE_NAMES
     measurement_names = MEASUREMENT_NAMES
     # the dual filter's parameter block: the last four states, within the frictions a road can have
@@ -58,15 +57,6 @@ class TwoTrackModel:
     # vx is held by the four wheel speeds, states beside it, and what moves it beyond their tires' forces (drag,
     # rolling resistance) is small: its own process noise (README "How far to trust the output", vx's std)
     vx_noise_key = "vx_from_wheel_states"
-
-    def __init__(self, vehicle: VehicleParams, tire: TireModelParams = TireModelParams()):
-        self.tire = tire
-        self.use_vehicle(vehicle)
-
-    def use_vehicle(self, vehicle: VehicleParams) -> None:
-        """Take ``vehicle``'s parameters (the online calibration's learned cornering stiffnesses)."""
-        self.vehicle = vehicle
-        self.wheels = WheelGeometry(vehicle)
 
     def forces(self, X: np.ndarray, u: np.ndarray, stiffness_scale=1.0):
         """Wheel-frame (Fx, Fy), their pure-slip longitudinal slope dFx/ds and the wheel speeds v_long, all (N, 4).

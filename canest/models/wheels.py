@@ -28,7 +28,7 @@ from __future__ import annotations
 import numpy as np
 
 from canest.params import VehicleParams
-from canest.models.tire import cornering_stiffness
+from canest.models.tire import TireModelParams, cornering_stiffness
 
 GRAVITY = 9.81
 FRONT = np.array([True, True, False, False])
@@ -111,3 +111,17 @@ class WheelGeometry:
     def cornering_stiffness(self, fz, tire):
         """Cornering stiffness (N/rad) of each wheel at loads ``fz`` (:func:`canest.models.tire.cornering_stiffness`)."""
         return cornering_stiffness(self.static_cornering_stiffness(), fz, self.static_load, tire.load_sensitivity)
+
+
+class WheelModel:
+    """What the two models on four tire curves (tire force, two track) are built on: the vehicle's parameters, its
+    wheels' geometry and the estimators' tire."""
+
+    def __init__(self, vehicle: VehicleParams, tire: TireModelParams = TireModelParams()):
+        self.tire = tire
+        self.use_vehicle(vehicle)
+
+    def use_vehicle(self, vehicle: VehicleParams) -> None:
+        """Take ``vehicle``'s parameters (the online calibration's learned cornering stiffnesses)."""
+        self.vehicle = vehicle
+        self.wheels = WheelGeometry(vehicle)
