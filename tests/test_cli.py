@@ -87,6 +87,24 @@ def test_simulate_gives_the_imu_a_real_car_s_vibration_on_request(tmp_path):
     assert result.returncode == 2 and "--vibration: a scale from 0 to 10" in result.stderr
 
 
+def test_simulate_blows_a_gusty_day_s_side_wind_on_request(tmp_path):
+    """``--crosswind 1``: on a straight launch the calm car's sideslip and yaw rate stay zero; gusts move both
+    (:mod:`canest.sim.wind`: 260 N in RMS at 80 km/h, the driver steering back onto the lane)."""
+    def straight(scale):
+        truth = tmp_path / f"wind{scale}.csv"
+        canest("simulate", "-m", "launch", "--duration", 4, "--crosswind", scale, "-o", tmp_path / "w.log",
+               "--truth", truth)
+        table = read_table(truth)
+        return np.degrees(np.abs(table["beta"]).max()), np.degrees(np.abs(table["yaw_rate"]).max())
+
+    (calm_beta, calm_yaw), (gusty_beta, gusty_yaw) = straight(0), straight(1)
+    assert calm_beta < 1e-9 and calm_yaw < 1e-9
+    assert 0.005 < gusty_beta < 0.5 and 0.1 < gusty_yaw < 5.0, (gusty_beta, gusty_yaw)
+    result = canest("simulate", "--crosswind", "nan", "-o", tmp_path / "x.log", "--truth", tmp_path / "t.csv",
+                    check=False)
+    assert result.returncode == 2 and "--crosswind: a scale from 0 to 5 (1: a gusty day's)" in result.stderr
+
+
 def test_run_on_a_bus_that_does_not_exist_fails_cleanly():
     result = canest("run", "--interface", "socketcan", "--channel", "nosuchcan9", check=False)
     assert result.returncode == 2

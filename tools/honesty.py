@@ -5,6 +5,7 @@
     python tools/honesty.py --small --filters all                 # 2 maneuvers x 2 frictions x 1 seed, 4 s each
     python tools/honesty.py --filters all --seeds 3 --json > honesty.json
     python tools/honesty.py --filters ckf,jckf --vibration 1     # the IMU vibrating as on a real car
+    python tools/honesty.py --filters ckf,jckf --crosswind 1     # gusts of side wind, a gusty day's
     python tools/honesty.py --filters all --seeds 3 --car drawn   # each seed a car as wrong as its config admits
     python tools/honesty.py --filters all --grade 6               # uphill at 6 %
     python tools/honesty.py --filters ckf --per-case vx            # and vx per drive: which cases make the pool
@@ -57,6 +58,7 @@ class Case:
     vibration: float = 0.0  # scale of the IMU's body vibration and road spikes (canest.sim.sensors; 0 none)
     car: str = "exact"  # "exact": the config's car; "drawn": per seed, one as wrong as the config admits
     grade: float = 0.0  # road grade, % (positive uphill)
+    crosswind: float = 0.0  # scale of the side wind's gusts (canest.sim.wind; 0 calm)
 
     def mismatch(self, config) -> PlantMismatch:
         car = (drawn_mismatch(config.vehicle, self.seed, config.estimator.gyro_bias_std) if self.car == "drawn"
@@ -68,7 +70,9 @@ class Case:
         length = f"-{self.duration:g}s" if self.duration else ""
         car = "" if self.car == "exact" else f"-{self.car}"
         grade = f"-grade{self.grade:g}" if self.grade else ""
-        return f"{self.maneuver}-{self.speed:g}kmh-mu{self.mu:g}-s{self.seed}{length}-vib{self.vibration:g}{car}{grade}"
+        wind = f"-wind{self.crosswind:g}" if self.crosswind else ""
+        return (f"{self.maneuver}-{self.speed:g}kmh-mu{self.mu:g}-s{self.seed}{length}-vib{self.vibration:g}{car}{grade}"
+                f"{wind}")
 
 
 def drive(config, case: Case, workdir: Path):
@@ -77,7 +81,7 @@ def drive(config, case: Case, workdir: Path):
     if not truth.exists():
         try:
             sim = simulate(config, case.maneuver, case.speed, case.mu, seed=case.seed, duration=case.duration,
-                           vibration=case.vibration, mismatch=case.mismatch(config))
+                           vibration=case.vibration, mismatch=case.mismatch(config), crosswind=case.crosswind)
         except SimulationError:
             return None
         sim.write_log(log)
@@ -213,7 +217,7 @@ def _pct(share: float) -> str:
 
 def cases_of(args) -> list:
     split = (lambda text: [p.strip() for p in str(text).split(",") if p.strip()])
-    return [Case(m, float(v), float(mu), seed, args.duration, args.vibration, args.car, args.grade)
+    return [Case(m, float(v), float(mu), seed, args.duration, args.vibration, args.car, args.grade, args.crosswind)
             for m in split(args.maneuvers)
             for v in split(args.speed) for mu in split(args.mu) for seed in range(args.seeds)]
 
@@ -230,6 +234,8 @@ def parse_args(argv=None):
     p.add_argument("--vibration", type=float, default=0.0,
                    help="IMU body vibration and road spikes, scale (default 0: white noise; 1: as on a real car, "
                         "README 'How far to trust the output')")
+    p.add_argument("--crosswind", type=float, default=0.0, metavar="SCALE",
+                   help="gusts of side wind (default 0: calm; 1: a gusty day's, canest simulate --crosswind)")
     p.add_argument("--car", choices=("exact", "drawn"), default="exact",
                    help="exact: the simulated car is the config's (default); drawn: each seed drives a car as wrong as "
                         "the config admits (cornering stiffnesses off by its cornering_stiffness_uncertainty, "

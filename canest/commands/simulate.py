@@ -20,6 +20,7 @@ EPILOG = """examples:
   canest simulate --maneuver dlc --speed 80 --mu 0.85 --out drive.log --truth truth.csv
   canest simulate --maneuver sine --speed 80 --mu 0.35 --out sine.blf --truth sine.csv --outliers 0.02
   canest simulate --maneuver step --vibration 1 --out rough.log --truth rough.csv   # an IMU on a real car's body
+  canest simulate --maneuver launch --crosswind 1 --out gusty.log --truth gusty.csv   # a gusty day's side wind
   canest simulate --maneuver step --mu 0.85,0.3,0.85,0.3 --out split.log --truth split.csv   # split mu: right side on ice
   canest simulate --maneuver sine --speed 60 --mu 0.85 --mu-jump 6:0.35 --out jump.log --truth jump.csv
   canest simulate --out - --truth truth.csv | canest replay - --csv est.csv    # candump text through a pipe
@@ -42,6 +43,13 @@ file is replaced, an input (config, DBC) never."""
 MIN_SPEED_KMH = 2.0  # the car starts at the target speed; the plant is valid from 0.5 m/s (1.8 km/h)
 MAX_SPEED_KMH = 300.0
 MAX_VIBRATION = 10.0  # times a real car's IMU vibration (canest.sim.sensors); at 10 ay's alone is 14 m/s^2, beyond any car
+MAX_CROSSWIND = 5.0  # times a gusty day's side wind (canest.sim.wind): gusts of 10 m/s in RMS, a storm's
+
+
+def check_scale(option: str, value: float, maximum: float, one: str) -> None:
+    """Refuse a scale outside 0 to ``maximum`` (and nan), naming the option and what 1 means (``one``)."""
+    if not 0.0 <= value <= maximum:
+        raise UsageError(f"{option}: a scale from 0 to {maximum:g} (1: {one}), got {value}")
 
 
 def register(subparsers) -> None:
@@ -68,6 +76,10 @@ def register(subparsers) -> None:
     p.add_argument("--vibration", type=float, default=0.0, metavar="SCALE",
                    help="the IMU's body vibration (coloured noise) and road spikes, as a real car's at 1: about one "
                         f"10 ms step of ay in six beyond 2 m/s^2; 0 to {MAX_VIBRATION:g} (default 0: none)")
+    p.add_argument("--crosswind", type=float, default=0.0, metavar="SCALE",
+                   help="gusts of side wind, a gusty day's at 1: 2 m/s of lateral wind in RMS, correlated over 2 s, "
+                        f"260 N of side force at 80 km/h that no estimator's model has; 0 to {MAX_CROSSWIND:g} "
+                        "(default 0: calm)")
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     p.add_argument("--start-time", type=float, default=0.0, help="timestamp of the first frame in s (default 0)")
     car = p.add_argument_group("the simulated car, where it differs from the config")
@@ -163,8 +175,8 @@ def run(args) -> int:
     mu_jump = parse_mu_jump(args.mu_jump)
     if not 0.0 <= args.outliers < 1.0:
         raise UsageError(f"--outliers: a probability per sample in [0, 1), got {args.outliers}")
-    if not 0.0 <= args.vibration <= MAX_VIBRATION:  # also refuses nan
-        raise UsageError(f"--vibration: a scale from 0 to {MAX_VIBRATION:g} (1: a real car's), got {args.vibration}")
+    check_scale("--vibration", args.vibration, MAX_VIBRATION, "a real car's")
+    check_scale("--crosswind", args.crosswind, MAX_CROSSWIND, "a gusty day's")
     if not MIN_SPEED_KMH <= args.speed <= MAX_SPEED_KMH:  # also refuses nan
         raise UsageError(f"--speed: a target speed from {MIN_SPEED_KMH:g} to {MAX_SPEED_KMH:g} km/h, got {args.speed}")
     if args.duration is not None and not (math.isfinite(args.duration) and args.duration > 0):
@@ -184,7 +196,7 @@ def run(args) -> int:
                               amplitude_deg=args.amplitude, seed=args.seed, noise_scale=args.noise_scale,
                               outliers=args.outliers, start_time=args.start_time, channel=config.input_bus.channel,
                               progress=lambda f: bar.update(round(100 * f) - bar.n), mu_jump=mu_jump,
-                              mismatch=mismatch, vibration=args.vibration)
+                              mismatch=mismatch, vibration=args.vibration, crosswind=args.crosswind)
         for output, write in zip(outputs, (write_log, write_truth)):
             try:
                 write(result, output)

@@ -18,7 +18,9 @@ Chassis: ``m (dvx/dt - r vy) = sum Fx_b - drag``, ``m (dvy/dt + r vx) = sum Fy_b
 ``Iz dr/dt = sum (x_i Fy_b,i - y_i Fx_b,i)``; a banked road adds gravity's
 ``bank_acceleration`` (m/s^2) to dvy/dt, which the measured ay (the tires' force) does not see, a road's
 grade its ``grade_acceleration`` to dvx/dt, unseen by the measured ax alike (its load transfer is the tires'
-force's, as the accelerometer's);
+force's, as the accelerometer's); a crosswind's ``side_force`` (N, :mod:`canest.sim.wind`), set before each
+step, adds to the body's lateral force at ``side_force_arm`` m ahead of the centre of gravity (the measured ay
+sees it: a force on the body, not gravity);
 wheels: ``J dw/dt = T - R Fx - R f_rr Fz``.
 """
 from __future__ import annotations
@@ -58,11 +60,13 @@ class PlantOutputs:
 
 class TwoTrackPlant:
     def __init__(self, vehicle: VehicleParams, mu, tire: TireParams = TireParams(), bank_acceleration: float = 0.0,
-                 grade_acceleration: float = 0.0):
+                 grade_acceleration: float = 0.0, side_force_arm: float = 0.0):
         self.p = vehicle
         self.tire = tire
         self.bank_acceleration = bank_acceleration
         self.grade_acceleration = grade_acceleration
+        self.side_force = 0.0  # N, body-lateral, held over a step (a crosswind's)
+        self.side_force_arm = side_force_arm
         self.mu = np.broadcast_to(np.asarray(mu, dtype=float), (4,)).copy()
         self.wheels = WheelGeometry(vehicle)
         self.pos_x, self.pos_y = self.wheels.pos_x, self.wheels.pos_y
@@ -93,7 +97,7 @@ class TwoTrackPlant:
         fy_b = fx * sin_d + fy * cos_d
         drag = 0.5 * AIR_DENSITY * DRAG_AREA * s[VX] * abs(s[VX])
         ax = (fx_b.sum() - drag) / p.mass
-        ay = fy_b.sum() / p.mass
+        ay = (fy_b.sum() + self.side_force) / p.mass
         d = np.empty(STATE_SIZE)
         cos_psi, sin_psi = np.cos(s[PSI]), np.sin(s[PSI])
         d[X] = s[VX] * cos_psi - s[VY] * sin_psi
@@ -101,7 +105,7 @@ class TwoTrackPlant:
         d[PSI] = s[R]
         d[VX] = ax + s[R] * s[VY] + self.grade_acceleration
         d[VY] = ay - s[R] * s[VX] + self.bank_acceleration
-        d[R] = (self.pos_x @ fy_b - self.pos_y @ fx_b) / p.yaw_inertia
+        d[R] = (self.pos_x @ fy_b - self.pos_y @ fx_b + self.side_force_arm * self.side_force) / p.yaw_inertia
         rolling = self.tire.rolling_resistance * fz * np.tanh(s[W] / 0.5)
         d[W] = (torque - p.wheel_radius * (fx + rolling)) / p.wheel_inertia
         d[FY] = speed / self.tire.relaxation_length * (fy_ss - fy)

@@ -25,6 +25,7 @@ from canest.sim.maneuvers import Driver, make_maneuver
 from canest.sim.mismatch import PlantMismatch, true_vehicle
 from canest.sim.plant import PSI, R, VX, VY, W, X, Y, TwoTrackPlant
 from canest.sim.sensors import SensorModel
+from canest.sim.wind import PRESSURE_CENTRE, Crosswind
 
 PLANT_DT = 0.001
 CONTROL_DT = 0.01
@@ -69,7 +70,7 @@ def _true_inputs(state, outputs, swa, torque, tilt) -> dict:
 def simulate(config: Config, maneuver: str, speed_kmh: float, mu, *, duration=None, amplitude_deg=None,
              seed: int = 0, noise_scale: float = 1.0, outliers: float = 0.0, start_time: float = 0.0,
              channel: str = "vcan0", progress=None, mu_jump=None, vibration: float = 0.0,
-             mismatch: PlantMismatch = PlantMismatch()) -> Simulation:
+             mismatch: PlantMismatch = PlantMismatch(), crosswind: float = 0.0) -> Simulation:
     """Simulate one run; ``mu`` is a scalar or four per-wheel friction coefficients.
 
     ``mismatch``: how the simulated car differs from ``config`` (:mod:`canest.sim.mismatch`); the frames are
@@ -77,12 +78,15 @@ def simulate(config: Config, maneuver: str, speed_kmh: float, mu, *, duration=No
 
     ``mu_jump = (t, mu)``: the road's friction changes to ``mu`` (scalar or four) at ``t`` s into the run.
     ``vibration``: scale of the IMU's body vibration and road spikes (:mod:`canest.sim.sensors`; 0 none).
+    ``crosswind``: scale of the gusts' side force (:mod:`canest.sim.wind`; 0 none, 1 a gusty day's).
     """
     rng = np.random.default_rng(seed)
     speed = speed_kmh / 3.6
     plan = make_maneuver(maneuver, speed, amplitude_deg, duration, seed)
     vehicle = true_vehicle(config.vehicle, mismatch)
-    plant = TwoTrackPlant(vehicle, mu, mismatch.tire(), mismatch.bank_acceleration, mismatch.grade_acceleration)
+    plant = TwoTrackPlant(vehicle, mu, mismatch.tire(), mismatch.bank_acceleration, mismatch.grade_acceleration,
+                          PRESSURE_CENTRE)
+    wind = Crosswind(seed, crosswind, PLANT_DT)
     tilt = (per_si(vehicle.accelerometer_pitch_gradient), per_si(vehicle.accelerometer_roll_gradient))
     driver = Driver(vehicle, plan, speed)
     sensors = SensorModel(rng, noise_scale, outliers, mismatch.sensor_errors(), vibration=vibration)
@@ -106,6 +110,7 @@ def simulate(config: Config, maneuver: str, speed_kmh: float, mu, *, duration=No
             swa = driver.steering_wheel_angle(t, state[X], state[Y], state[PSI], state[VX], CONTROL_DT)
             torque = driver.motor_torques(t, state[VX], state[W], CONTROL_DT)
         delta = swa / vehicle.steering_ratio
+        plant.side_force = wind.side_force(state[VX])
         slope, outputs = plant.derivatives(state, delta, torque)
         if k % truth_every == 0:
             rows.append(_truth_row(t + start_time, state, outputs, delta, swa, plant.mu, torque))
