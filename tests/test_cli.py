@@ -89,7 +89,7 @@ def test_simulate_gives_the_imu_a_real_car_s_vibration_on_request(tmp_path):
 
 def test_simulate_blows_a_gusty_day_s_side_wind_on_request(tmp_path):
     """``--crosswind 1``: on a straight launch the calm car's sideslip and yaw rate stay zero; gusts move both
-    (:mod:`canest.sim.wind`: 260 N in RMS at 80 km/h, the driver steering back onto the lane)."""
+    (:mod:`canest.sim.wind`: 180 N in RMS at 80 km/h, the driver steering back onto the lane)."""
     def straight(scale):
         truth = tmp_path / f"wind{scale}.csv"
         canest("simulate", "-m", "launch", "--duration", 4, "--crosswind", scale, "-o", tmp_path / "w.log",

@@ -78,7 +78,7 @@ def register(subparsers) -> None:
                         f"10 ms step of ay in six beyond 2 m/s^2; 0 to {MAX_VIBRATION:g} (default 0: none)")
     p.add_argument("--crosswind", type=float, default=0.0, metavar="SCALE",
                    help="gusts of side wind, a gusty day's at 1: 2 m/s of lateral wind in RMS, correlated over 2 s, "
-                        f"260 N of side force at 80 km/h that no estimator's model has; 0 to {MAX_CROSSWIND:g} "
+                        f"180 N of side force at 80 km/h that no estimator's model has; 0 to {MAX_CROSSWIND:g} "
                         "(default 0: calm)")
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     p.add_argument("--start-time", type=float, default=0.0, help="timestamp of the first frame in s (default 0)")

@@ -10,7 +10,7 @@ about the size of a gust near the ground), zero mean (a steady wind is a
 bank's cousin the online calibration sees as a lateral offset). The side force
 is linear in the crosswind's angle ``w / v``: ``F = 1/2 rho A C_y' v w``
 (``SIDE_FORCE_FACTOR``: frontal area 2.2 m^2 and a side-force slope of 3 per
-rad, a passenger car's), 260 N in RMS at 80 km/h, acting ``PRESSURE_CENTRE`` m
+rad, a passenger car's), 180 N in RMS at 80 km/h, acting ``PRESSURE_CENTRE`` m
 ahead of the centre of gravity (the aerodynamic centre of a saloon lies
 ahead of it: the yaw moment turns the car out of the wind). The accelerometer
 measures it (a force on the body, unlike a bank's gravity), so a model that
