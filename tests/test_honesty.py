@@ -440,3 +440,9 @@ def test_check_fails_the_command_when_a_state_is_outside_the_targets(capsys, tmp
         s = out[row["filter"]][row["state"]]
         assert (s["vbw"] > 0.001 or not 0.90 <= s["cov2"] <= 0.98 or not 0.5 <= s["nees"] <= 2.0
                 or s["wrong_sign"] > 0), row
+
+
+def test_a_windy_drive_is_cached_apart_from_the_calm_one_whose_name_is_unchanged():
+    calm, gusty = honesty.Case("launch", 80.0, 0.85, 0), honesty.Case("launch", 80.0, 0.85, 0, crosswind=1.0)
+    assert calm.key == "launch-80kmh-mu0.85-s0-vib0"  # the drives cached before crosswind existed
+    assert gusty.key == "launch-80kmh-mu0.85-s0-vib0-wind1"
