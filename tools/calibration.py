@@ -93,19 +93,19 @@ def rmse(config, log: Path, truth: Path, skip: float = 0.5, on_frame=None, at_en
 
 
 def online(config, duration: float, bank_deg: float, workdir: Path, attitude=(0.0, 0.0), seed: int = 3,
-           vibration: float = 0.0) -> None:
+           vibration: float = 0.0, crosswind: float = 0.0) -> None:
     """The online calibration's learned values over one road, and what it does to the estimates after 60 s;
     ``attitude``: the body's (roll, pitch) gradients in deg/g, which its accelerometers read; ``vibration``: the
-    IMU's (:mod:`canest.sim.sensors`)."""
+    IMU's (:mod:`canest.sim.sensors`); ``crosswind``: the gusts' scale (:mod:`canest.sim.wind`)."""
     mismatch = dataclasses.replace(WRONG, bank=math.radians(bank_deg), roll_gradient=attitude[0],
                                    pitch_gradient=attitude[1])
     name = (f"online-s{seed}-bank{bank_deg:g}" + ("-roll{:g}-pitch{:g}".format(*attitude) if any(attitude) else "")
-            + (f"-vib{vibration:g}" if vibration else ""))
+            + (f"-vib{vibration:g}" if vibration else "") + (f"-wind{crosswind:g}" if crosswind else ""))
     log, truth = drive_files(workdir, name, duration)
     if not (log.exists() and truth.exists()):
         print(f"simulating road {seed} ({duration:g} s, bank {bank_deg:+g} deg) ...", file=sys.stderr, flush=True)
         sim = simulate(config, "country", 80.0, 0.85, duration=duration, seed=seed, mismatch=mismatch,
-                       vibration=vibration)
+                       vibration=vibration, crosswind=crosswind)
         sim.write_log(log)
         sim.write_truth(truth)
     deg = math.degrees(1.0)
@@ -206,16 +206,22 @@ def main() -> None:
     parser.add_argument("--vibration", type=float, default=0.0,
                         help="with --online: the IMU's body vibration and road spikes, scale (default 0: white noise; "
                              "1: as on a real car, canest.sim.sensors)")
+    parser.add_argument("--crosswind", type=float, default=0.0,
+                        help="with --online: gusts of side wind, scale (default 0: calm; 1: a gusty day's, "
+                             "canest.sim.wind)")
     args = parser.parse_args()
-    if not args.online and (args.seed != 3 or args.vibration or args.bank != 3.0 or any(args.attitude)):
-        parser.error("--seed, --vibration, --bank and --attitude choose the road of --online")
-    if args.vibration < 0.0:
-        parser.error(f"--vibration is a scale of at least 0, got {args.vibration}")
+    if not args.online and (args.seed != 3 or args.vibration or args.crosswind or args.bank != 3.0
+                            or any(args.attitude)):
+        parser.error("--seed, --vibration, --crosswind, --bank and --attitude choose the road of --online")
+    for option, scale in (("--vibration", args.vibration), ("--crosswind", args.crosswind)):
+        if not scale >= 0.0:
+            parser.error(f"{option} is a scale of at least 0, got {scale}")
     config = load_config(args.config)
     workdir = folder(Path(args.workdir), Path(args.config), config.input_dbc)
     workdir.mkdir(parents=True, exist_ok=True)
     if args.online:
-        online(config, args.duration or 120.0, args.bank, workdir, args.attitude, args.seed, args.vibration)
+        online(config, args.duration or 120.0, args.bank, workdir, args.attitude, args.seed, args.vibration,
+               args.crosswind)
         return
     args.duration = args.duration or 60.0
     paths = drives(config, args.duration, workdir)
