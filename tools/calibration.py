@@ -146,9 +146,9 @@ def online(config, duration: float, bank_deg: float, workdir: Path, attitude=(0.
                      ["the true car and sensor biases (tools/calibration.py --online)"])
     exact = rmse(without_learning(load_config(true_config)), log, truth, skip=60.0)
     start = dict(zip(NAMES, (p.start for p in parameters(config.vehicle))))
-    print(f"online calibration, road {seed}, bank {bank_deg:+g} deg, IMU vibration {vibration:g} (true: the "
-          "equivalent flat road's steering offset and ay bias, which hold the bank; the offset's for linear tires: "
-          "the plant's curve moves it 0.2-0.3 deg more on a 3 deg bank)")
+    print(f"online calibration, road {seed}, bank {bank_deg:+g} deg, IMU vibration {vibration:g}, crosswind "
+          f"{crosswind:g} (true: the equivalent flat road's steering offset and ay bias, which hold the bank; the "
+          "offset's for linear tires: the plant's curve moves it 0.2-0.3 deg more on a 3 deg bank)")
     print(f"{'parameter':<16} {'unit':<6} {'true':>9} {'config':>9} " +
           " ".join(f"{f'at {m:g} s':>20}" for m in snapshots) + "   error at 60 s (bound)")
     for name, (true, factor, unit, bound) in rows.items():
