@@ -197,6 +197,59 @@ def test_the_unexplained_lateral_velocity_is_what_the_admitted_ay_offset_cannot_
     assert drift.unexplained == 0.0
 
 
+def test_a_sideslip_stays_unknown_while_the_car_moved_sideways_as_the_model_did_not():
+    """A slide the model missed since its sideslip was last known keeps the sideslip from coming back: beyond
+    RETURN_TOLERANCE at vx (0.17 m/s at 20 m/s), not within it; the admitted ay offset still explains its share."""
+    dt, vx, yaw_rate, ay_bias = 0.01, 20.0, 0.2, 0.1
+    drift = validity.LateralDrift(dt, ay_bias)
+    drift.update(vx * yaw_rate, yaw_rate, vx, 0.0, True, True)  # the sideslip known (0)
+    assert drift.allows_return(vx)
+    for _ in range(50):  # 0.5 s unknown, the car's vy moves -0.2 m/s that the model does not follow
+        drift.update(vx * yaw_rate - 0.4, yaw_rate, vx, 0.0, True, False)
+    assert drift.unexplained == pytest.approx(0.2 - ay_bias * 0.5, rel=0.02)  # 0.15 m/s: inside the tolerance
+    assert drift.allows_return(vx)
+    for _ in range(50):  # another 0.5 s: -0.4 m/s, 0.3 beyond the offset's share
+        drift.update(vx * yaw_rate - 0.4, yaw_rate, vx, 0.0, True, False)
+    assert drift.unexplained > validity.RETURN_TOLERANCE * vx
+    assert not drift.allows_return(vx)
+    drift.update(vx * yaw_rate, yaw_rate, vx, math.atan(-0.4 / vx), True, False)  # the model catches up
+    assert drift.allows_return(vx)
+
+
+def test_a_road_s_bias_never_holds_the_sideslip_shut_for_good():
+    """A real road's ay runs off the kinematic identity by more than the configured noise admits (the Ford's
+    log: 0.25 m/s^2 against 0.15): integrated, it outgrows any tolerance. The return is tested for
+    RETURN_MEMORY s after the sideslip was last known, and never against a start's anchor."""
+    dt, vx, yaw_rate, ay_bias = 0.01, 20.0, 0.05, 0.15
+    drift = validity.LateralDrift(dt, ay_bias)
+    for _ in range(300):  # 3 s of a start, the sideslip not yet known: nothing to test against
+        drift.update(vx * yaw_rate + 0.25, yaw_rate, vx, 0.0, True, False)
+        assert drift.allows_return(vx)
+    drift.update(vx * yaw_rate + 0.25, yaw_rate, vx, 0.0, True, True)  # known once
+    returns = []
+    for _ in range(int(round(2 * validity.RETURN_MEMORY / dt))):
+        drift.update(vx * yaw_rate + 0.25, yaw_rate, vx, 0.0, True, False)
+        returns.append(drift.allows_return(vx))
+    assert drift.unexplained > validity.RETURN_TOLERANCE * vx  # 0.1 m/s^2 unexplained for 6 s: 0.6 m/s
+    first_held = returns.index(False) * dt
+    assert first_held < validity.RETURN_MEMORY
+    assert returns[-1] and all(returns[int(round(validity.RETURN_MEMORY / dt)):])
+
+
+def test_a_noisy_ay_integrated_while_the_sideslip_was_unknown_does_not_hold_it_shut():
+    """A vibrating ay's integral wanders by sqrt(density t): the return test takes KINEMATIC_NOISE_GATE standard
+    deviations of it, as the kinematic window test does."""
+    dt, vx, yaw_rate, density = 0.01, 20.0, 0.2, 0.02  # m^2/s^3: 1.4 m/s^2 white at 10 ms
+    quiet, loud = validity.LateralDrift(dt), validity.LateralDrift(dt)
+    for drift, noise in ((quiet, 0.0), (loud, density)):
+        drift.update(vx * yaw_rate, yaw_rate, vx, 0.0, True, True, 0.0, noise)
+        for _ in range(200):  # 2 s unknown; the kinematic vy is -0.4 m/s off the model's
+            drift.update(vx * yaw_rate - 0.2, yaw_rate, vx, 0.0, True, False, 0.0, noise)
+    # the noise gate: 2 sqrt(0.02 * 2) = 0.4 m/s, in quadrature with 0.17
+    assert not quiet.allows_return(vx)
+    assert loud.allows_return(vx)
+
+
 def test_lateral_drift_spreads_vx_by_the_known_sideslips_own_uncertainty():
     """A sideslip known within its std still moves an integrated vx: at r times std(vy), linearly."""
     dt, vx, yaw_rate, lateral_std = 0.01, 20.0, -0.3, 0.3

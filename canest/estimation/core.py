@@ -475,8 +475,9 @@ class Estimator:
             stiffness_std = self.judge.sideslip_model_std(vx * x[self.yaw], rear_slip)
         offset_std = self.judge.sideslip_offset_std()  # a learned ay offset not applied: no model's Q holds it
         beta_model_std = math.hypot(stiffness_std, offset_std, self._sideslip_saturation_std())
+        ay_density = self._ay_density(inputs)
         drift = self.judge.drift(inputs, vx, beta, math.hypot(std[self.beta], beta_model_std),
-                                 reference.last_t != t or reference.anchored_at == t)
+                                 reference.last_t != t or reference.anchored_at == t, ay_density)
         carried = self.covariance_has_tire_error and not self.low_speed  # the model's Q has the tire error
         # vx driven by the wheels' forces can leave the reference; one integrating ax shares its integration (ax and
         # r vy alike), and their difference tells nothing
@@ -502,7 +503,7 @@ class Estimator:
         lateral = {"low_speed": mode == "low_speed", "after_reset": mode == "degraded" and t < self.suspect_until,
                    "zero_learned": self.steering_zero.learned, "ay_noise_known": self._ay_noise_known(inputs),
                    "lateral_ok": lateral_ok, "beta": beta, "vx": vx,
-                   "delta": delta, "ay_density": self._ay_density(inputs),
+                   "delta": delta, "ay_density": ay_density,
                    "at_limit_of_unbounded_friction": self._at_limit_of_unbounded_friction(),
                    "frictions_pressed": self._frictions_pressed()}
         walk_unknown = self.ax_noise.density is None and reference.last_t == t

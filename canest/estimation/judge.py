@@ -133,16 +133,17 @@ class StateJudge:
         unadmitted = max(0.0, abs(self.kinematic_offsets[0]) - self.ay_noise)
         return validity.sideslip_offset_std(self.vehicle, unadmitted)
 
-    def drift(self, inputs, vx: float, beta: float, beta_std: float, vx_measured: bool) -> float:
+    def drift(self, inputs, vx: float, beta: float, beta_std: float, vx_measured: bool,
+              ay_density: float = 0.0) -> float:
         """This tick's bound on vx's drift from an unmodelled lateral velocity (0 without ay or a gyro);
         ``beta_std``: the sideslip's std, the filter's with the model's error; ``vx_measured``: the wheels
-        measured vx this tick."""
+        measured vx this tick; ``ay_density``: ay's noise density where it is louder than configured."""
         if not inputs.has("ay", "yaw_rate"):
             self.lateral_drift.reset()
             return 0.0
         ay, yaw_rate = self._kinematic_inputs(inputs)
         return self.lateral_drift.update(ay, yaw_rate, vx, beta, vx_measured, self.sideslip_known,
-                                         lateral_velocity_of(vx, beta, beta_std))
+                                         lateral_velocity_of(vx, beta, beta_std), ay_density)
 
     def lateral_std(self, drift: float) -> float:
         """The vx error (m/s) a lateral velocity the model misses may have caused since the wheels last measured vx:
@@ -262,6 +263,7 @@ class StateJudge:
         moving_as_measured = self.kinematic.inside(beta, *self._kinematic_inputs(inputs), vx, ay_density)
         in_regime = self.regime is None or self.regime.inside(delta, vx, inputs.values["yaw_rate"])
         in_regime = in_regime and not at_limit_of_unbounded_friction
-        if not (moving_as_measured and in_regime):
+        returning_as_measured = self.sideslip_known or self.lateral_drift.allows_return(vx)
+        if not (moving_as_measured and in_regime and returning_as_measured):
             return "model_regime"
         return "at_bound" if frictions_pressed else "valid"
