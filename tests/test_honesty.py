@@ -223,7 +223,7 @@ def test_the_sideslip_std_carries_a_stiffness_error_near_the_tire_limit(tmp_path
 def test_a_sideslip_lost_in_a_slide_does_not_come_back_while_the_car_moved_as_the_model_did_not(tmp_path):
     """A drawn car in gusts (seed 1), step steer on 0.35: a slide of 6-7 deg that jckf read as 3-4.5. Its bit came
     back at 4.93 s, as the kinematic window agreed again in the steady slide, 3.3 deg off with a std of 1.0 (0.4 %
-    of that grid's ticks valid but wrong): its model had moved 1.7 deg since the sideslip was last known, the car's
+    of that grid's valid ticks, wrong): its model had moved 1.7 deg since the sideslip was last known, the car's
     lateral velocity 0.5 m/s more (``validity.LateralDrift.allows_return``)."""
     case = honesty.Case("step", 80.0, 0.35, 1, car="drawn", crosswind=1.0)
     result = honesty.run_case(CONFIG, ["jckf"], case, tmp_path)

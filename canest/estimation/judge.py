@@ -263,7 +263,6 @@ class StateJudge:
         moving_as_measured = self.kinematic.inside(beta, *self._kinematic_inputs(inputs), vx, ay_density)
         in_regime = self.regime is None or self.regime.inside(delta, vx, inputs.values["yaw_rate"])
         in_regime = in_regime and not at_limit_of_unbounded_friction
-        returning_as_measured = self.sideslip_known or self.lateral_drift.allows_return(vx)
-        if not (moving_as_measured and in_regime and returning_as_measured):
+        if not (moving_as_measured and in_regime and self.lateral_drift.allows_return(vx)):
             return "model_regime"
         return "at_bound" if frictions_pressed else "valid"
