@@ -236,6 +236,49 @@ def test_a_road_s_bias_never_holds_the_sideslip_shut_for_good():
     assert returns[-1] and all(returns[int(round(validity.RETURN_MEMORY / dt)):])
 
 
+def test_the_road_s_offset_is_learned_from_the_ticks_the_sideslip_was_known():
+    """The kinematic lateral velocity leaves the model's at the road's offset (a bank, an ay bias): measured over the
+    known ticks, against the prior the config gives (0 within the configured ay noise). A moment of known sideslip
+    learns little, a long stretch the road; an old road is forgotten over OFFSET_MEMORY."""
+    dt, prior, lateral_std, offset = 0.01, 0.15, 0.05, 0.4
+    road = validity.RoadOffset(dt, prior)
+    assert (road.rate, road.std) == (0.0, prior)  # nothing learned
+    difference = 0.0
+    for _ in range(10):  # 0.1 s known: the model's lateral velocity error at the ends outweighs 0.04 m/s of offset
+        difference += offset * dt
+        road.update(difference, True, lateral_std, 0.0)
+    assert road.rate < 0.1 * offset and road.std > 0.9 * prior
+    for _ in range(990):  # 10 s known
+        difference += offset * dt
+        road.update(difference, True, lateral_std, 0.0)
+    road.update(difference, False, lateral_std, 0.0)  # the stretch ends
+    assert road.rate == pytest.approx(offset, rel=0.01)
+    # the error: 2 std of the lateral velocity at the stretch's two ends over its ~10 s
+    assert road.std == pytest.approx(validity.KINEMATIC_NOISE_GATE * math.sqrt(2) * lateral_std / 10.0, rel=0.2)
+    for _ in range(int(3 * validity.OFFSET_MEMORY / dt)):  # known again, on a flat road: the bank is forgotten
+        road.update(difference, True, lateral_std, 0.0)
+    assert abs(road.rate) < 0.05 * offset
+
+
+def test_a_road_s_offset_learned_while_the_sideslip_was_known_holds_no_sideslip_shut():
+    """The Ford's log: its ay runs 0.25 m/s^2 off the kinematic identity against a configured 0.15. Taken as the
+    configured noise alone, 10 s unknown outgrow any tolerance; learned over the seconds the sideslip was known,
+    the road explains it, and a slide on that road is still a slide."""
+    dt, vx, yaw_rate, ay_bias, offset = 0.01, 20.0, 0.05, 0.15, 0.25
+    learned, unlearned = validity.LateralDrift(dt, ay_bias), validity.LateralDrift(dt, ay_bias)
+    for drift, known in ((learned, 500), (unlearned, 1)):
+        for _ in range(known):  # 5 s (or a tick) of known sideslip on the road
+            drift.update(vx * yaw_rate + offset, yaw_rate, vx, 0.0, True, True, 0.05)
+        for _ in range(1000):  # 10 s unknown on the same road, the model's sideslip 0
+            drift.update(vx * yaw_rate + offset, yaw_rate, vx, 0.0, True, False, 0.05)
+    assert unlearned.unexplained > 0.5  # m/s: 0.1 m/s^2 beyond the admitted for 10 s
+    assert learned.unexplained < 0.05
+    for _ in range(100):  # then a slide on that road the model misses: vy -1 m/s in 1 s, of which the learned
+        # offset's error (2 std of 0.05 m/s at the ends of 5 s: 0.03 m/s^2) explains 0.3 m/s after 11 s
+        learned.update(vx * yaw_rate + offset - 1.0, yaw_rate, vx, 0.0, True, False, 0.05)
+    assert learned.unexplained > validity.RETURN_TOLERANCE * vx
+
+
 def test_a_noisy_ay_integrated_while_the_sideslip_was_unknown_does_not_hold_it_shut():
     """A vibrating ay's integral wanders by sqrt(density t): the return test takes KINEMATIC_NOISE_GATE standard
     deviations of it, as the kinematic window test does."""

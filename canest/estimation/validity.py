@@ -155,8 +155,8 @@ import numpy as np
 from canest.estimation.estimate import CAUSE_GROUPS as GROUPS, CAUSES
 from canest.estimation.lags import FirstOrderLag
 
-__all__ = ["CAUSES", "GROUPS", "Consistency", "Holds", "KinematicCheck", "LateralDrift", "LinearRegime", "inflation",
-           "judge", "innovation_terms", "sideslip_model_std", "sideslip_offset_std", "understeer_std"]
+__all__ = ["CAUSES", "GROUPS", "Consistency", "Holds", "KinematicCheck", "LateralDrift", "LinearRegime", "RoadOffset",
+           "inflation", "judge", "innovation_terms", "sideslip_model_std", "sideslip_offset_std", "understeer_std"]
 
 WINDOW = 50  # channel samples
 MIN_SAMPLES = 10  # before this many samples a channel's mean is not judged
@@ -176,7 +176,8 @@ MODEL_ERROR_MEMORY = 1.0  # s, time constant of the leaky maximum the sideslip's
 KINEMATIC_NOISE_GATE = 2.0  # standard deviations of ay's integrated noise the kinematic change may be off by
 DRIFT_LIMIT = 0.5  # m/s of possible vx drift above which the car slides (vx "model_regime"; as VX_VALID_STD)
 RETURN_TOLERANCE = math.radians(0.5)  # rad, as a lateral velocity at vx: what a sideslip coming back may have missed
-RETURN_MEMORY = 3.0  # s after the sideslip was last known within which its return is tested (a real road's biases)
+RETURN_MEMORY = 3.0  # s after the sideslip was last known within which its return is tested (a road offset beyond the learned)
+OFFSET_MEMORY = 30.0  # s, time constant over which the road's lateral offset is learned from the sideslip's known ticks
 # The channels that observe each published state (any model; a model without the channel just lacks it).
 OBSERVED_BY = {
     "yaw_rate": ("yaw_rate", "yaw_rate_2"),
@@ -368,6 +369,69 @@ class KinematicCheck:
         return abs((beta_now - beta_then) - change) <= math.hypot(absolute + relative * abs(change), gate)
 
 
+class RoadOffset:
+    """The road's lateral offset (m/s^2): the rate at which the kinematic lateral velocity, ``integral(ay - r vx)``,
+    leaves the model's ``vx tan(beta)`` while the sideslip is known: a bank's gravity, an ay bias, a gyro bias times
+    vx, none of them a lateral velocity of the car's.
+
+    Learned over the ticks the sideslip was known (each stretch of them adds its change of that difference and
+    its time) as a leaky mean over ``OFFSET_MEMORY`` s, so a road whose bank changes is followed. The measured
+    rate's error is the model's lateral velocity error at each stretch's two ends (its std,
+    ``lateral_std``, at both) and ay's integrated noise beyond the configured, at ``KINEMATIC_NOISE_GATE``
+    standard deviations, over the stretches' time; combined with the prior the config gives (0, the configured
+    ay noise: the offset it admits), a few seconds of known sideslip learn little and a long drive learns the
+    road. :attr:`rate` and :attr:`std` are that combination: with nothing learned 0 and the configured noise."""
+
+    def __init__(self, dt: float, prior_std: float):
+        self.dt = dt
+        self.prior_std = prior_std
+        self.leak = math.exp(-dt / OFFSET_MEMORY)
+        self.reset()
+
+    def reset(self) -> None:
+        self.change = 0.0  # m/s, the difference's change over the known ticks (a leaky sum)
+        self.time = 0.0  # s, those ticks' time (a leaky sum)
+        self.variance = 0.0  # m^2/s^2, the variance of ``change``'s error: the stretches' ends and ay's noise
+        self.last = None  # (difference, lateral_std) on the last tick, if the sideslip was known on it
+
+    def update(self, difference: float, known: bool, lateral_std: float, ay_density: float) -> None:
+        """One tick: ``difference`` (m/s) the kinematic lateral velocity less the model's, ``known`` the sideslip,
+        ``lateral_std`` (m/s) the model's lateral velocity std, ``ay_density`` (m^2/s^3) ay's noise density beyond
+        the configured (:class:`KinematicCheck`)."""
+        self.change *= self.leak
+        self.time *= self.leak
+        self.variance *= self.leak * self.leak
+        if known and self.last is not None:
+            self.change += difference - self.last[0]
+            self.time += self.dt
+            self.variance += ay_density * self.dt
+        elif known:  # a stretch begins: its start's error
+            self.variance += lateral_std * lateral_std
+        elif self.last is not None:  # a stretch ended: its end's error
+            self.variance += self.last[1] * self.last[1]
+        self.last = (difference, lateral_std) if known else None
+
+    def _measured_variance(self) -> float:
+        ended = self.variance + (self.last[1] ** 2 if self.last is not None else 0.0)  # an open stretch's end
+        return KINEMATIC_NOISE_GATE ** 2 * ended / (self.time * self.time)
+
+    @property
+    def rate(self) -> float:
+        """The offset (m/s^2), the measured rate shrunk towards 0 as its error is to the prior."""
+        if self.time <= 0.0 or self.prior_std <= 0.0:
+            return 0.0
+        prior = self.prior_std ** 2
+        return self.change / self.time * prior / (prior + self._measured_variance())
+
+    @property
+    def std(self) -> float:
+        """The offset's error (m/s^2): the prior's and the measurement's, combined."""
+        if self.time <= 0.0 or self.prior_std <= 0.0:
+            return self.prior_std
+        prior, measured = self.prior_std ** 2, self._measured_variance()
+        return math.sqrt(prior * measured / (prior + measured))
+
+
 class LateralDrift:
     """The vx error (m/s) an unmodelled lateral velocity can have caused since the wheels last measured vx.
 
@@ -386,8 +450,8 @@ class LateralDrift:
 
     :attr:`unexplained` is the lateral velocity's error while the sideslip is not known, for what the error does
     beside the drift (vx read through the steered wheels, :func:`canest.estimation.judge.steered_wheels_std`):
-    ``|e|`` beyond what an ay offset of ``ay_bias`` (the configured ay noise: the offset it admits) integrates to
-    over that time. Taken whole, ``e`` drifts with every ay bias for as long as the sideslip stays unknown: a drawn
+    ``|e|`` less the road's offset (:class:`RoadOffset`, learned while the sideslip was known, the configured ay noise
+    ``ay_bias`` its prior) integrated over that time, beyond that offset's error integrated alike. Taken whole, ``e`` drifts with every ay bias for as long as the sideslip stays unknown: a drawn
     car's ay bias of -0.21 m/s^2 in a 180 s slalom at 20 km/h (its sideslip valid on 9 % of the ticks) took ckf's
     vx std to 0.6 m/s against errors below 0.1, and vx ``uncertain``. Remembered for 5 s only instead (a leaky
     ``e``), dici-gfckf's vx in the step steer on 0.35, its sideslip 3-4 deg off for 5 s, fell out of its std
@@ -403,10 +467,11 @@ class LateralDrift:
 
     def __init__(self, dt: float, ay_bias: float = 0.0):
         self.dt = dt
-        self.ay_bias = ay_bias
+        self.road = RoadOffset(dt, ay_bias)
         self.reset()
 
     def reset(self) -> None:
+        self.road.reset()
         self.kinematic = 0.0
         self.known = None  # (kinematic, model) lateral velocity when the sideslip was last known
         self.ever_known = False  # the sideslip was known since the reset: the anchor is a valid one
@@ -424,6 +489,7 @@ class LateralDrift:
         model = vx * math.tan(beta)
         if sideslip_known or self.known is None:
             self.known = (self.kinematic, model)
+        self.road.update(self.kinematic - model, sideslip_known, lateral_std, ay_density)
         self.ever_known = self.ever_known or sideslip_known
         self.unknown_for = 0.0 if sideslip_known else self.unknown_for + self.dt
         self.unknown_noise = 0.0 if sideslip_known else self.unknown_noise + ay_density * self.dt
@@ -434,14 +500,16 @@ class LateralDrift:
 
     @property
     def unexplained(self) -> float:
-        return max(0.0, abs(self.mismatch) - self.ay_bias * self.unknown_for)
+        road = self.road
+        return max(0.0, abs(self.mismatch - road.rate * self.unknown_for) - road.std * self.unknown_for)
 
     def allows_return(self, vx: float) -> bool:
         """Whether a sideslip not known may be known again: its lateral velocity's unexplained error is within
         ``RETURN_TOLERANCE`` at ``vx`` and the noise gate, in quadrature. Tested only against an anchor that was
-        known (not a start's) and for ``RETURN_MEMORY`` s: beyond, a real road's biases outgrow the tolerance
-        and would hold the bit shut for good (the Ford's log, whose ay runs 0.25 m/s^2 off the kinematic
-        identity against a configured 0.15: its sideslip valid on 50 ticks of 2090, then never again)."""
+        known (not a start's) and for ``RETURN_MEMORY`` s: a road offset beyond the learned one (a bank that
+        changed while the sideslip was unknown) would otherwise hold the bit shut for good. Before the offset was
+        learned (:class:`RoadOffset`) the Ford's log, whose ay runs 0.25 m/s^2 off the kinematic identity against
+        a configured 0.15, had its sideslip valid on 50 ticks of 2090 without that limit, then never again."""
         if not self.ever_known or self.unknown_for > RETURN_MEMORY:
             return True
         gate = KINEMATIC_NOISE_GATE * math.sqrt(self.unknown_noise)
