@@ -176,7 +176,7 @@ MODEL_ERROR_MEMORY = 1.0  # s, time constant of the leaky maximum the sideslip's
 KINEMATIC_NOISE_GATE = 2.0  # standard deviations of ay's integrated noise the kinematic change may be off by
 DRIFT_LIMIT = 0.5  # m/s of possible vx drift above which the car slides (vx "model_regime"; as VX_VALID_STD)
 RETURN_TOLERANCE = math.radians(0.5)  # rad, as a lateral velocity at vx: what a sideslip coming back may have missed
-RETURN_MEMORY = 3.0  # s after the sideslip was last known within which its return is tested (a road offset beyond the learned)
+RETURN_MEMORY = 3.0  # s after the sideslip was last known within which its return is tested (an unlearned offset)
 OFFSET_MEMORY = 30.0  # s, time constant over which the road's lateral offset is learned from the sideslip's known ticks
 # The channels that observe each published state (any model; a model without the channel just lacks it).
 OBSERVED_BY = {
@@ -450,8 +450,9 @@ class LateralDrift:
 
     :attr:`unexplained` is the lateral velocity's error while the sideslip is not known, for what the error does
     beside the drift (vx read through the steered wheels, :func:`canest.estimation.judge.steered_wheels_std`):
-    ``|e|`` less the road's offset (:class:`RoadOffset`, learned while the sideslip was known, the configured ay noise
-    ``ay_bias`` its prior) integrated over that time, beyond that offset's error integrated alike. Taken whole, ``e`` drifts with every ay bias for as long as the sideslip stays unknown: a drawn
+    ``|e|`` less the road's offset (:class:`RoadOffset`, learned while the sideslip was known, the configured ay
+    noise ``ay_bias`` its prior) integrated over that time, beyond that offset's error integrated alike. Taken
+    whole, ``e`` drifts with every ay bias for as long as the sideslip stays unknown: a drawn
     car's ay bias of -0.21 m/s^2 in a 180 s slalom at 20 km/h (its sideslip valid on 9 % of the ticks) took ckf's
     vx std to 0.6 m/s against errors below 0.1, and vx ``uncertain``. Remembered for 5 s only instead (a leaky
     ``e``), dici-gfckf's vx in the step steer on 0.35, its sideslip 3-4 deg off for 5 s, fell out of its std
