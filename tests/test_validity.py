@@ -271,12 +271,12 @@ def test_a_road_s_offset_learned_while_the_sideslip_was_known_holds_no_sideslip_
             drift.update(vx * yaw_rate + offset, yaw_rate, vx, 0.0, True, True, 0.05)
         for _ in range(1000):  # 10 s unknown on the same road, the model's sideslip 0
             drift.update(vx * yaw_rate + offset, yaw_rate, vx, 0.0, True, False, 0.05)
-    assert unlearned.unexplained > 0.5  # m/s: 0.1 m/s^2 beyond the admitted for 10 s
-    assert learned.unexplained < 0.05
+    assert unlearned.unexplained_by_road > 0.5  # m/s: 0.1 m/s^2 beyond the admitted for 10 s
+    assert learned.unexplained_by_road < 0.05
     for _ in range(100):  # then a slide on that road the model misses: vy -1 m/s in 1 s, of which the learned
         # offset's error (2 std of 0.05 m/s at the ends of 5 s: 0.03 m/s^2) explains 0.3 m/s after 11 s
         learned.update(vx * yaw_rate + offset - 1.0, yaw_rate, vx, 0.0, True, False, 0.05)
-    assert learned.unexplained > validity.RETURN_TOLERANCE * vx
+    assert learned.unexplained_by_road > validity.RETURN_TOLERANCE * vx
 
 
 def test_a_noisy_ay_integrated_while_the_sideslip_was_unknown_does_not_hold_it_shut():
