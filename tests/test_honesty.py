@@ -248,15 +248,17 @@ def test_the_lateral_forces_std_is_the_tire_curves_error_not_a_random_walks(tmp_
     wheels together, over a 300 N/sqrt(s) floor. The sideslip's covariance holds that error too, as a relaxing
     noise: the stiffness term of the other models added on top of it doubled it (NEES 0.35 on this drive, 1.26
     counted once). It is the std's floor instead: NEES 0.40 here, where the car's stiffnesses are within 13 % of the
-    config's and the floor is wider than their error; the next test shows why the floor must be there."""
+    config's and the floor is wider than their error; the next test shows why the floor must be there. (The forces
+    and the sideslip share one bit: valid on 31 % of the ticks with a sideslip's return tested for 3 s, 26 % at 5 s,
+    ``validity.RETURN_MEMORY``; judged over more than a fifth.)"""
     case = honesty.Case("sine", 80.0, 0.85, 2, car="drawn")
     result = honesty.run_case(CONFIG, ["dici-gfckf"], case, tmp_path)
     scores = [honesty.summarize(f"fy_{wheel}", result["sums"]["dici-gfckf"][f"fy_{wheel}"])
               for wheel in ("fl", "fr", "rl", "rr")]
-    assert all(score.valid > 0.3 and score.vbw == 0.0 for score in scores), scores
+    assert all(score.valid > 0.2 and score.vbw == 0.0 for score in scores), scores
     assert 0.4 <= sum(score.nees for score in scores) / len(scores) <= 2.0, scores
     sideslip = honesty.summarize("beta", result["sums"]["dici-gfckf"]["beta"])
-    assert sideslip.valid > 0.3 and sideslip.vbw == 0.0 and 0.38 <= sideslip.nees <= 2.0, sideslip
+    assert sideslip.valid > 0.2 and sideslip.vbw == 0.0 and 0.38 <= sideslip.nees <= 2.0, sideslip
 
 
 def test_the_tire_force_sideslip_std_is_never_below_a_stiffness_error_held_steadily(tmp_path):

@@ -176,7 +176,7 @@ MODEL_ERROR_MEMORY = 1.0  # s, time constant of the leaky maximum the sideslip's
 KINEMATIC_NOISE_GATE = 2.0  # standard deviations of ay's integrated noise the kinematic change may be off by
 DRIFT_LIMIT = 0.5  # m/s of possible vx drift above which the car slides (vx "model_regime"; as VX_VALID_STD)
 RETURN_TOLERANCE = math.radians(0.5)  # rad, as a lateral velocity at vx: what a sideslip coming back may have missed
-RETURN_MEMORY = 3.0  # s after the sideslip was last known within which its return is tested (an unlearned offset)
+RETURN_MEMORY = 5.0  # s after the sideslip was last known within which its return is tested (an unlearned offset)
 OFFSET_MEMORY = 30.0  # s, time constant over which the road's lateral offset is learned from the sideslip's known ticks
 # The channels that observe each published state (any model; a model without the channel just lacks it).
 OBSERVED_BY = {
