@@ -30,3 +30,19 @@ def test_reset_forgets_the_slope():
         hold.at(0.01 * k, 0.1 * k, age=0.0)
     hold.reset()
     assert hold.at(1.0, 0.3, age=0.008) == 0.3  # one sample: no slope yet
+
+
+@pytest.mark.parametrize("age", (0.005, 0.008))
+def test_the_noise_factor_is_the_held_values_scatter_over_the_samples(age):
+    """A white noise sampled every 10 ms, brought forward ``age`` s: the held values scatter by ``noise_factor``
+    times the samples' (the slope's noise leans on the newest sample), which the published yaw rate's std takes."""
+    rng = np.random.default_rng(8855)
+    hold, held, factors = GyroHold(), [], []
+    for k in range(20000):
+        t = 0.01 * k + age
+        held.append(hold.at(t, rng.standard_normal(), age=age))
+        factors.append(hold.noise_factor(age))
+    steady = slice(100, None)
+    assert np.std(held[steady]) == pytest.approx(np.mean(factors[steady]), rel=0.05)
+    assert np.mean(factors[steady]) > 1.05
+    assert hold.noise_factor(0.0) == 1.0

@@ -16,7 +16,11 @@ is wrong where the model is (tire saturation); this hold needs no model.
 """
 from __future__ import annotations
 
-from canest.models.wheel_force import WheelAcceleration
+import math
+
+import numpy as np
+
+from canest.models.wheel_force import MEDIAN_SLOPE_NOISE, WheelAcceleration
 
 
 class GyroHold:
@@ -38,3 +42,23 @@ class GyroHold:
             self.rate = float(self.slopes.update(sample_time, [value])[0])
             self.last_sample_time = sample_time
         return value + age * self.rate
+
+    def noise_factor(self, age: float) -> float:
+        """The std of :meth:`at`'s value over the held sample's, for a white noise on the samples: the value is the
+        newest sample plus ``age`` times a slope whose noise leans on that same sample, ``sum_i w_i g_i`` with
+        ``w_i = [i newest] + age c_i`` (``c_i`` a least-squares slope's weights, ``(t_i - mean t) / sum (t - mean
+        t)^2``, times ``MEDIAN_SLOPE_NOISE`` for the median of pairwise slopes): ``sqrt(sum w_i^2)``. 1.12 at 5 ms,
+        1.19 at 8 ms for 5 samples 10 ms apart; on the vibrating honesty grid the held gyro's error was 1.13 and
+        1.19 times the sample's (launch, ESC gyro 5 and 8 ms old at the tick)."""
+        slopes = self.slopes
+        n = slopes.samples
+        if n < 2 or age <= 0.0:
+            return 1.0
+        times = slopes.times[:n]
+        centred = times - times.mean()
+        spread = float(np.sum(centred * centred))
+        if spread <= 0.0:
+            return 1.0
+        weights = age * MEDIAN_SLOPE_NOISE * centred / spread
+        weights[int(np.argmax(times))] += 1.0
+        return math.sqrt(float(np.sum(weights * weights)))

@@ -36,7 +36,9 @@ friction's and the divergence test keep the configured noise,
 :mod:`canest.estimation.validity`; the
 published ``InnovationNis`` is the filter's, with the R it used); the published yaw
 rate's std, times the gyro's measured over configured noise
-(:meth:`canest.estimation.judge.StateJudge.widen`), and the two-track model's yaw acceleration, the gyro's slope,
+(:meth:`canest.estimation.judge.StateJudge.widen`), which with the hold's factor
+(:meth:`canest.estimation.gyro_hold.GyroHold.noise_factor`) the yaw rate's consistency test also judges the
+gyro under (:meth:`canest.estimation.judge.StateJudge.record`), and the two-track model's yaw acceleration, the gyro's slope,
 by the slope of the gyro's noise beyond the configured (its R:
 :meth:`canest.estimation.two_track.FrictionEstimator._yaw_acceleration_noise`); vx's process noise where
 vx integrates the measured ax; and the reference speed's std while it
