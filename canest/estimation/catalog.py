@@ -70,12 +70,15 @@ class ModelEntry:
         return bool(getattr(self.model, "parameters", 0))
 
 
+SECOND_GYRO = "the yaw rate from the first gyro alone"  # what a model reading a second gyro where mapped does without
 CATALOG = {entry.name: entry for entry in (
-    ModelEntry("single_track", SingleTrackModel, SingleTrackEstimator, "ckf", BASE_INPUTS),
+    ModelEntry("single_track", SingleTrackModel, SingleTrackEstimator, "ckf", BASE_INPUTS,
+               optional_groups={"imu_2": SECOND_GYRO}),
     ModelEntry("tire_force", TireForceModel, TireForceEstimator, "ckf", BASE_INPUTS,
                {"sensor_sets": INPUT_GROUPS["imu_2"]},
-               {"motor_torques": "longitudinal forces from ax and vehicle.drive"}),
-    ModelEntry("two_track", TwoTrackModel, FrictionEstimator, "jckf", BASE_INPUTS + INPUT_GROUPS["motor_torques"]),
+               {"motor_torques": "longitudinal forces from ax and vehicle.drive", "imu_2": "the first IMU alone"}),
+    ModelEntry("two_track", TwoTrackModel, FrictionEstimator, "jckf", BASE_INPUTS + INPUT_GROUPS["motor_torques"],
+               optional_groups={"imu_2": SECOND_GYRO}),
 )}
 DEFAULT_MODEL = "single_track"
 

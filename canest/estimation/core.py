@@ -442,7 +442,11 @@ class Estimator:
 
     def _gyro_noise(self, inputs: TickInputs) -> float:
         """The largest ratio of a present gyro's noise as its value at the tick carries it (:meth:`_held_gyro_noise`)
-        to its configured one (1 while none is measured)."""
+        to its configured one (1 while none is measured). The largest, not the two gyros' average as a filter weighing
+        them by their configured noise would take it: the filters weigh them otherwise (svd-fckf by its adapted R,
+        dici-gfckf by covariance intersection), and with the average their yaw rate on the drawn cars with a vibrating
+        IMU was valid but wrong on 0.20 and 0.12 % of the ticks (0.07 and 0.08 % with the largest; ckf's within 2 std
+        on 98.4 instead of 99.0 %)."""
         return max((held / self.r_std[row] for row, held in self._held_gyro_noise(inputs).items()), default=1.0)
 
     def _ay_noise_known(self, inputs: TickInputs) -> bool:

@@ -22,8 +22,9 @@ wheel's slip dynamics are stiff (time constant ``J v / (R^2 K)``, ~2 ms at
 Magic Formula's slope, stable for any step; the body states take explicit
 steps with the forces of the substep's start.
 
-Measurements: ``(ax, ay, r, w_fl, w_fr, w_rl, w_rr)`` (the paper's ``Z = (ax, ay, r)``
-plus the wheel-speed sensors, which observe the wheel states).
+Measurements: ``(ax, ay, r, dr/dt, vx, w_fl, w_fr, w_rl, w_rr, r_2)`` (the paper's ``Z = (ax, ay, r)``, the
+gyro's slope (:mod:`canest.estimation.two_track`), the reference speed, the wheel-speed sensors, which observe
+the wheel states, and a second gyro where the car sends one, as the single-track model's).
 """
 from __future__ import annotations
 
@@ -33,7 +34,7 @@ from canest.models.tire import friction_circle, magic_formula, magic_formula_slo
 from canest.models.wheels import MIN_WHEEL_SPEED, WheelModel
 
 STATE_NAMES = ("yaw_rate", "beta", "vx", "w_fl", "w_fr", "w_rl", "w_rr", "mu_fl", "mu_fr", "mu_rl", "mu_rr")
-MEASUREMENT_NAMES = ("ax", "ay", "yaw_rate", "yaw_acceleration", "vx_reference", "wheel_speed_fl", "wheel_speed_fr", "wheel_speed_rl", "wheel_speed_rr")
+MEASUREMENT_NAMES = ("ax", "ay", "yaw_rate", "yaw_acceleration", "vx_reference", "wheel_speed_fl", "wheel_speed_fr", "wheel_speed_rl", "wheel_speed_rr", "yaw_rate_2")
 YAW, BETA, VX = 0, 1, 2
 W = slice(3, 7)
 MU = slice(7, 11)
@@ -132,7 +133,7 @@ class TwoTrackModel(WheelModel):
     def measure(self, X: np.ndarray, u: np.ndarray) -> np.ndarray:
         fx, fy, _, _ = self.forces(X, u)
         ax, ay, yaw_acc = self.wheels.body_accelerations(fx, fy, u[DELTA])
-        return np.column_stack([ax, ay, X[:, YAW], yaw_acc, X[:, VX], X[:, W]])
+        return np.column_stack([ax, ay, X[:, YAW], yaw_acc, X[:, VX], X[:, W], X[:, YAW]])
 
     def friction_sensitivity(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:
         """|d|F_ij| / d mu_ij| per wheel (N per unit friction) at the state x: how much a tire says about its mu.
