@@ -11,7 +11,7 @@ from canest.sim.simulate import simulate
 
 
 def scores_of(pipeline, frames, truth, states) -> dict:
-    """Each state's :class:`canest.apps.evaluate.Score` over ``frames`` fed to ``pipeline`` (the first 0.5 s skipped)."""
+    """Per state, the :class:`canest.apps.evaluate.Score` of ``pipeline`` fed ``frames`` (first 0.5 s skipped)."""
     estimates = [e for frame in frames for e in pipeline.feed(frame)]
     table = {"t": np.array([e.t for e in estimates]), "valid": np.array([e.valid_flags for e in estimates]),
              **{name: np.array([e.values[name] for e in estimates]) for s in states for name in (s, f"{s}_std")}}

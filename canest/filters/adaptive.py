@@ -1,6 +1,6 @@
 """Filters that estimate their own noise statistics from a window of innovations.
 
-Measurement channels (ay, yaw rate, wheel speed) arrive at different rates
+Measurement channels (ay, yaw rate, wheel speed, a second gyro) arrive at different rates
 and not every tick, so the statistics are kept per channel: each channel has
 its window of innovations ``r`` and of their predicted variance without noise
 ``(H P H^T)_cc``; the estimated R is diagonal. An estimate is used once a

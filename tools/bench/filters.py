@@ -7,14 +7,14 @@
 Each filter runs the estimator's own Transition and Measurement on inputs of a
 sine steer, every measurement every step:
 
-* 3-DOF single track (RK4; ay, yaw rate, wheel speed): every filter but the
+* 3-DOF single track (RK4; ay, yaw rate, wheel speed, second gyro): every filter but the
   parameter filters jckf and dckf;
 * 7-state tire-force model (RK4; ax, ay, yaw rate, wheel speed): the
   sigma-point filters (the EKF family needs Jacobians this model does not
   have); ``dici-gfckf`` updates its two local filters with one IMU each
   (ax, ay, yaw rate of IMU 1 or 2, plus the wheel speed);
 * 7-DOF two-track model with friction (11 states; ax, ay, yaw rate, yaw
-  acceleration, reference speed, four wheel speeds): ``jckf`` and ``dckf``.
+  acceleration, reference speed, four wheel speeds, second gyro): ``jckf`` and ``dckf``.
 
 filterpy's UnscentedKalmanFilter runs the same model functions (one point at a
 time, as its API requires) in the same run as the reference; it is a
@@ -50,9 +50,9 @@ def single_track_case(vehicle, steps):
     model = SingleTrackModel(vehicle)
     us = [np.array([d, 0.1, 1.0]) for d in steering(steps)]
     x0, P0 = np.array([0.0, 0.0, 22.0]), np.diag([0.05, 0.05, 2.0]) ** 2
-    Q, R = np.diag([0.05, 0.01, 0.3]) ** 2 * 0.01, np.diag([0.15, 0.005, 0.15]) ** 2
+    Q, R = np.diag([0.05, 0.01, 0.3]) ** 2 * 0.01, np.diag([0.15, 0.005, 0.15, 0.01]) ** 2  # ay, gyro, wheels, gyro 2
     names = [n for n in FILTERS if n not in PARAMETER_FILTERS]
-    return model, us, x0, P0, Q, R, np.array([0.5, 0.02, 22.0]), names, slice(0, 3)
+    return model, us, x0, P0, Q, R, np.array([0.5, 0.02, 22.0, 0.02]), names, slice(0, 4)
 
 
 def tire_force_case(vehicle, steps):
@@ -72,9 +72,9 @@ def two_track_case(vehicle, steps):
     x0 = np.array([0.0, 0.0, 22.0, w0, w0, w0, w0, 0.9, 0.9, 0.9, 0.9])
     P0 = np.diag([0.05, 0.05, 2.0, 1.0, 1.0, 1.0, 1.0, 0.3, 0.3, 0.3, 0.3]) ** 2
     Q = np.diag([0.05, 0.01, 0.3, 5.0, 5.0, 5.0, 5.0, 0.1, 0.1, 0.1, 0.1]) ** 2 * 0.01
-    R = np.diag([0.15, 0.15, 0.005, 0.1, 0.05, 0.1, 0.1, 0.1, 0.1]) ** 2
-    z = np.array([0.1, 0.5, 0.02, 0.0, 22.0, w0, w0, w0, w0])
-    return model, us, x0, P0, Q, R, z, list(PARAMETER_FILTERS), slice(0, 9)
+    R = np.diag([0.15, 0.15, 0.005, 0.1, 0.05, 0.1, 0.1, 0.1, 0.1, 0.01]) ** 2
+    z = np.array([0.1, 0.5, 0.02, 0.0, 22.0, w0, w0, w0, w0, 0.02])
+    return model, us, x0, P0, Q, R, z, list(PARAMETER_FILTERS), slice(0, 10)
 
 
 CASES = {"3-DOF single track": single_track_case, "7-state tire forces": tire_force_case,
