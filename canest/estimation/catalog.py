@@ -76,7 +76,7 @@ CATALOG = {entry.name: entry for entry in (
                optional_groups={"imu_2": SECOND_GYRO}),
     ModelEntry("tire_force", TireForceModel, TireForceEstimator, "ckf", BASE_INPUTS,
                {"sensor_sets": INPUT_GROUPS["imu_2"]},
-               {"motor_torques": "longitudinal forces from ax and vehicle.drive", "imu_2": "the first IMU alone"}),
+               {"motor_torques": "longitudinal forces from ax and vehicle.drive"}),
     ModelEntry("two_track", TwoTrackModel, FrictionEstimator, "jckf", BASE_INPUTS + INPUT_GROUPS["motor_torques"],
                optional_groups={"imu_2": SECOND_GYRO}),
 )}
