@@ -1,4 +1,5 @@
-"""Real IMU traffic is never thrown away: body vibration and road spikes pass the plausibility limits."""
+"""Real IMU traffic is never thrown away: body vibration and road spikes pass the plausibility limits; a second
+IMU's gyro, vibrating on its own, averages the yaw rate's noise down."""
 import dataclasses
 
 import numpy as np
