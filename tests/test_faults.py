@@ -35,7 +35,7 @@ pytestmark = pytest.mark.socketcan
 DB = cantools.database.load_file(str(ROOT / "dbc" / "canest_estimates.dbc"))
 STATUS = DB.get_message_by_name("CE_Status")
 OUTPUT_IDS = {m.frame_id for m in DB.messages}
-IMU_BIT = 1 << list(INPUT_GROUPS).index("imu")
+IMU_BIT, IMU_2_BIT = (1 << list(INPUT_GROUPS).index(group) for group in ("imu", "imu_2"))
 BETA_VALID, YAW_VALID = 1 << 2, 1 << 3
 CAUSES = DB.get_message_by_name("CE_ValidityCause")
 QUEUE_BYTES = 4 * 1024 * 1024  # ~5000 frames, 9 s of the drive: a starved guest's daemon falls behind, not drops
@@ -107,8 +107,9 @@ def session(dlc_run, tmp_path):
 
 def test_input_interface_down_up_and_deleted_then_back(session):
     """Down, the socket stays bound and waits; deleted, a new socket is opened with backoff. Either way the
-    daemon goes on sending its status, flagged input missing and yaw rate invalid, and estimates normally
-    again once the interface is back."""
+    daemon goes on sending its status, flagged input missing and, once the airbag unit's gyro is stale too (a
+    few ticks after the ESC's: its frames come every 20 ms), yaw rate invalid, and estimates normally again once
+    the interface is back."""
     daemon, player, capture = session()
     assert wait_for_status(capture, normal), "the daemon never estimated normally"
     phases = {"down": (lambda: ip("set", "vcan0", "down"), lambda: ip("set", "vcan0", "up")),
@@ -122,8 +123,9 @@ def test_input_interface_down_up_and_deleted_then_back(session):
         bring_back()
         assert len(while_away) >= 20, f"{phase}: the daemon stopped sending its status while its input was away"
         wrong = [(i, s["MissingInputs"], s["ValidFlags"]) for i, s in enumerate(while_away)
-                 if not imu_missing(s) or s["ValidFlags"] & YAW_VALID]
+                 if not imu_missing(s) or (s["MissingInputs"] & IMU_2_BIT and s["ValidFlags"] & YAW_VALID)]
         assert not wrong, f"{phase}: statuses (index, missing, valid) of {len(while_away)}: {wrong[:20]}"
+        assert sum(bool(s["MissingInputs"] & IMU_2_BIT) for s in while_away) >= 20, f"{phase}: the ACU stayed fresh"
         assert wait_for_status(capture, normal, since=time.time(), run=20), f"{phase}: not normal again"
     assert "diverged" not in daemon.stderr
     assert daemon.terminate() == 0
@@ -134,8 +136,9 @@ def test_input_interface_down_up_and_deleted_then_back(session):
 
 
 def test_one_input_message_stops_and_recovers(session):
-    """The IMU message is withheld for one second of the drive: the statuses say so, yaw rate and sideslip
-    invalid, the speed from the wheels still valid, until the IMU is back and the daemon estimates normally."""
+    """The IMU message is withheld for one second of the drive: the statuses say so, sideslip invalid, the yaw
+    rate still valid on the airbag unit's gyro and the speed from the wheels, until the IMU is back and the
+    daemon estimates normally."""
     daemon, player, capture = session(drop=lambda f, elapsed: f.arbitration_id == 0x130 and 2.0 < elapsed < 3.0)
     t_missing = wait_for_status(capture, imu_missing, run=10)
     t_back = wait_for_status(capture, lambda s: not s["MissingInputs"], since=t_missing or time.time())
@@ -143,11 +146,12 @@ def test_one_input_message_stops_and_recovers(session):
     assert t_missing and t_back and t_normal, (t_missing, t_back, t_normal)
     missing = statuses(capture.frames, t_missing, t_back - 1e-6)
     # a stall of the loaded guest's player may leave another input stale for a tick too: the IMU is named in
-    # every status, and vx stays valid in each where the IMU is the only one missing
+    # every status, and vx and the yaw rate stay valid in each where the IMU is the only one missing
     only_imu = [s for s in missing if s["MissingInputs"] == IMU_BIT]
     assert all(imu_missing(s) for s in missing) and len(only_imu) >= 20
-    assert all(s["ValidFlags"] & (YAW_VALID | BETA_VALID) == 0 for s in missing)
+    assert all(s["ValidFlags"] & BETA_VALID == 0 for s in missing)
     assert all(s["ValidFlags"] & 1 for s in only_imu), "vx from the wheels stays valid"
+    assert all(s["ValidFlags"] & YAW_VALID for s in only_imu), "the airbag unit's gyro carries the yaw rate"
     assert daemon.terminate() == 0
 
 
