@@ -241,12 +241,12 @@ def test_before_the_corrections_are_applied_vx_and_the_yaw_rate_carry_the_config
         error = np.abs(np.array([e.values[state] for e in estimates]) - truth)
         return np.mean(error < 2.0 * np.array([e.values[f"{state}_std"] for e in estimates]))
 
-    for state in ("vx", "yaw_rate"):
+    # the premise: claimed exact, most fall outside (vx: none within; the yaw rate 28 % within: the ACU's gyro,
+    # unbiased, takes a fifth of its weight)
+    for state, exact_within in (("vx", 0.1), ("yaw_rate", 0.4)):
         valid = {name: [e for e in estimates if e.valid.get(state)] for name, estimates in runs.items()}
         assert len(valid["claiming"]) > 500 and within_two_std(valid["claiming"], state) > 0.98
-        # the premise: claimed exact, most fall outside (vx: none within; the yaw rate 28 % within: the ACU's
-        # gyro, unbiased, takes a fifth of its weight)
-        assert within_two_std(valid["exact"], state) < 0.4
+        assert within_two_std(valid["exact"], state) < exact_within
     fast = [e for e in runs["claiming"] if abs(e.values["vx"]) * 0.03 > 0.55]
     assert len(fast) > 500 and not any(e.valid.get("vx") for e in fast)
     uncertain = [e for e in fast if e.causes["vx"] == "uncertain" and e.valid["vy"]]
