@@ -34,7 +34,8 @@ from canest.models.tire import friction_circle, magic_formula, magic_formula_slo
 from canest.models.wheels import MIN_WHEEL_SPEED, WheelModel
 
 STATE_NAMES = ("yaw_rate", "beta", "vx", "w_fl", "w_fr", "w_rl", "w_rr", "mu_fl", "mu_fr", "mu_rl", "mu_rr")
-MEASUREMENT_NAMES = ("ax", "ay", "yaw_rate", "yaw_acceleration", "vx_reference", "wheel_speed_fl", "wheel_speed_fr", "wheel_speed_rl", "wheel_speed_rr", "yaw_rate_2")
+MEASUREMENT_NAMES = ("ax", "ay", "yaw_rate", "yaw_acceleration", "vx_reference",
+                     "wheel_speed_fl", "wheel_speed_fr", "wheel_speed_rl", "wheel_speed_rr", "yaw_rate_2")
 YAW, BETA, VX = 0, 1, 2
 W = slice(3, 7)
 MU = slice(7, 11)
