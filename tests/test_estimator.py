@@ -7,7 +7,7 @@ import pytest
 
 from canest.codec.encode import InputEncoder
 from canest.apps.compare import with_filter
-from canest.apps.evaluate import read_table, score
+from canest.apps.evaluate import read_table, score, table_of
 from canest.estimation.catalog import make_estimator
 from canest.pipeline import Pipeline
 from canest.apps.replay import replay
@@ -31,14 +31,25 @@ def test_double_lane_change_accuracy(config, dlc_run, tmp_path):
     assert np.all(est["mode"][60:] == "normal")
 
 
+def test_the_estimates_in_memory_are_the_columns_of_the_replays_csv(config, dlc_run, tmp_path):
+    """What compare, demo and the tools score from the estimates is what `canest evaluate` reads from the CSV."""
+    ticks = []
+    replay(config, dlc_run[0], out_csv=tmp_path / "est.csv", progress=False, on_estimate=ticks.append)
+    in_memory, written = table_of(ticks), read_table(tmp_path / "est.csv")
+    assert set(in_memory) <= set(written) and len(ticks) > 100
+    for column, values in in_memory.items():
+        np.testing.assert_allclose(values, written[column], rtol=1e-6, atol=1e-9, err_msg=column)
+    truth = read_table(dlc_run[1])
+    for ours, evaluated in zip(score(in_memory, truth, skip=0.5), score(written, truth, skip=0.5), strict=True):
+        numbers = ("rmse", "valid", "cov2", "nees", "vbw")
+        assert [getattr(ours, n) for n in numbers] == pytest.approx([getattr(evaluated, n) for n in numbers], rel=1e-5)
+
+
 def test_sine_steer_accuracy(config, tmp_path):
     sim = simulate(config, "sine", 80.0, 0.85, seed=5)
     pipeline = Pipeline(config)
     estimates = [e for frame in sim.frames for e in pipeline.feed(frame)]
-    table = {"t": np.array([e.t for e in estimates]), "valid": np.array([e.valid_flags for e in estimates])}
-    for name in ("vx", "yaw_rate", "beta"):
-        table[name] = np.array([e.values[name] for e in estimates])
-    result = rmse(score(table, sim.truth, skip=0.5))
+    result = rmse(score(table_of(estimates), sim.truth, ("vx", "yaw_rate", "beta"), skip=0.5))
     # Measured 0.07 m/s, 0.18 deg/s, 1.1 deg: at 6.4 m/s^2 the tires saturate and the linear-tire model does not.
     assert result["vx"] < 0.15
     assert result["yaw_rate"] < 0.35

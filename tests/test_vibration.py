@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from canest.apps.compare import with_filter
-from canest.apps.evaluate import score
+from canest.apps.evaluate import score, table_of
 from canest.pipeline import Pipeline
 from canest.sim.simulate import simulate
 
@@ -14,9 +14,7 @@ from canest.sim.simulate import simulate
 def scores_of(pipeline, frames, truth, states) -> dict:
     """Per state, the :class:`canest.apps.evaluate.Score` of ``pipeline`` fed ``frames`` (first 0.5 s skipped)."""
     estimates = [e for frame in frames for e in pipeline.feed(frame)]
-    table = {"t": np.array([e.t for e in estimates]), "valid": np.array([e.valid_flags for e in estimates]),
-             **{name: np.array([e.values[name] for e in estimates]) for s in states for name in (s, f"{s}_std")}}
-    return {s.state: s for s in score(table, truth, states, skip=0.5)}
+    return {s.state: s for s in score(table_of(estimates), truth, states, skip=0.5)}
 
 
 def test_a_vibrating_imu_loses_no_frame_and_no_divergence_resets_with_its_noise_configured(config):

@@ -17,7 +17,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from canest.config import DEFAULT_CONFIG, load_config  # noqa: E402
-from canest.apps.evaluate import score  # noqa: E402
+from canest.apps.evaluate import score, table_of  # noqa: E402
 from canest.pipeline import Pipeline  # noqa: E402
 from canest.sim.simulate import simulate  # noqa: E402
 
@@ -30,10 +30,7 @@ def run_case(config, maneuver, speed, mu, seed):
     sim = simulate(config, maneuver, speed, mu, seed=seed)
     pipeline = Pipeline(config)
     estimates = [e for frame in sim.frames for e in pipeline.feed(frame)]
-    table = {"t": np.array([e.t for e in estimates]), "valid": np.array([e.valid_flags for e in estimates])}
-    for name in STATES:
-        table[name] = np.array([e.values[name] for e in estimates])
-    return {s.state: s.rmse for s in score(table, sim.truth, STATES, skip=0.5)}
+    return {s.state: s.rmse for s in score(table_of(estimates), sim.truth, STATES, skip=0.5)}
 
 
 def main():

@@ -33,7 +33,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from canest.models.output_error import calibrate  # noqa: E402
 from canest.apps.calibrated_config import write_calibrated  # noqa: E402
 from canest.apps.drive_signals import read_drive  # noqa: E402
-from canest.apps.evaluate import read_table, score  # noqa: E402
+from canest.apps.evaluate import read_table, score, table_of  # noqa: E402
 from canest.commands.calibrate import format_fit  # noqa: E402
 from canest.config import DEFAULT_CONFIG, load_config  # noqa: E402
 from canest.estimation.learned_parameters import NAMES, parameters  # noqa: E402
@@ -86,10 +86,7 @@ def rmse(config, log: Path, truth: Path, skip: float = 0.5, on_frame=None, at_en
             on_frame(pipeline, frame.timestamp)
     if at_end is not None:
         at_end(pipeline)
-    table = {"t": np.array([e.t for e in estimates]), "valid": np.array([e.valid_flags for e in estimates])}
-    for name in STATES:
-        table[name] = np.array([e.values[name] for e in estimates])
-    return {s.state: s.rmse for s in score(table, read_table(truth), STATES, skip=skip)}
+    return {s.state: s.rmse for s in score(table_of(estimates), read_table(truth), STATES, skip=skip)}
 
 
 def online(config, duration: float, bank_deg: float, workdir: Path, attitude=(0.0, 0.0), seed: int = 3,

@@ -23,7 +23,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from canest.apps.evaluate import score  # noqa: E402
+from canest.apps.evaluate import score, table_of  # noqa: E402
 from canest.config import load_config  # noqa: E402
 from canest.pipeline import Pipeline  # noqa: E402
 from canest.sim.simulate import simulate  # noqa: E402
@@ -41,8 +41,7 @@ def replay(config, model: str, sim) -> dict:
     pipeline = Pipeline(config)
     estimates = [e for frame in sim.frames for e in pipeline.feed(frame)]
     summary = pipeline.summary()
-    table = {"t": np.array([e.t for e in estimates]), "valid": np.array([e.valid_flags for e in estimates]),
-             **{s: np.array([e.values[s] for e in estimates]) for s in STATES}}
+    table = table_of(estimates)
     valid = {s.state: s for s in score(table, sim.truth, STATES, skip=SKIP)}
     every = {s.state: s for s in score(table, sim.truth, STATES, only_valid=False, skip=SKIP)}
     return {"rejected_implausible": summary.get("rejected_implausible", 0),

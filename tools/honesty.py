@@ -31,11 +31,10 @@ import sys
 import time
 from pathlib import Path
 
-import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from canest.apps.compare import runnable, with_filter  # noqa: E402
-from canest.apps.evaluate import DISPLAY, counts, pool, read_table, summarize  # noqa: E402
+from canest.apps.evaluate import DISPLAY, counts, pool, read_table, summarize, table_of  # noqa: E402
 from canest.apps.replay import replay  # noqa: E402
 from canest.config import DEFAULT_CONFIG, load_config  # noqa: E402
 from canest.errors import CanestError, SimulationError  # noqa: E402
@@ -88,14 +87,6 @@ def drive(config, case: Case, workdir: Path):
         sim.write_truth(f"{truth}.tmp")
         Path(f"{truth}.tmp").rename(truth)
     return log, truth
-
-
-def table_of(estimates) -> dict:
-    """Estimates as the columns of a CSV (t, states, _std, valid)."""
-    table = {"t": np.array([e.t for e in estimates]), "valid": np.array([e.valid_flags for e in estimates])}
-    for name in estimates[-1].values:
-        table[name] = np.array([e.values[name] for e in estimates])
-    return table
 
 
 def replayed(config, name: str, log: Path) -> tuple:

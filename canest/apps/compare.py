@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from canest.errors import ConfigError, UsageError
-from canest.apps.evaluate import DISPLAY, as_json, score
+from canest.apps.evaluate import DISPLAY, as_json, score, table_of
 from canest.apps.replay import replay
 from canest.estimation import catalog
 from canest.filters import FILTERS
@@ -87,9 +87,7 @@ def run_filter(config: Config, log_path, truth: dict, name: str, skip: float = 0
 
     config = with_filter(config, name) if name != config.estimator.filter else config
     repairs = replay(config, log_path, progress=False, on_estimate=collect, step_times=step_times, **reading)["repairs"]
-    table = {"t": np.array([e.t for e in estimates]), "valid": np.array([e.valid_flags for e in estimates])}
-    for state in estimates[-1].values:
-        table[state] = np.array([e.values[state] for e in estimates])
+    table = table_of(estimates)
     states = [s for s in DISPLAY if s in table and s in truth and s != "vy"]  # forces and friction where estimated
     scores = {s.state: s for s in score(table, truth, states, only_valid, skip)}
     return FilterRun(name, table, scores, float(np.median(step_times)) * 1e6 if step_times else float("nan"), repairs)

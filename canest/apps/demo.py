@@ -17,7 +17,7 @@ import can
 import numpy as np
 
 from canest.settings import BusConfig, Config
-from canest.apps.evaluate import format_table, score
+from canest.apps.evaluate import format_table, score, table_of
 from canest.pipeline import format_summary
 from canest.apps.replay import play_messages
 from canest.apps.service import Service
@@ -113,12 +113,9 @@ def run_demo(config: Config, maneuver="dlc", speed_kmh=80.0, mu=0.85, seed=0, pl
     player_bus.shutdown()
     # Ticks are anchored at the first frame: map them onto the simulation clock.
     t0_wall, t0_log = service.pipeline.clock.t0, sim.frames[0].timestamp
-    table = {"t": np.array([e.t - t0_wall for e in estimates]) * playback_speed + t0_log}
-    for name in ("vx", "vy", "beta", "yaw_rate"):
-        for column in (name, f"{name}_std"):  # the std too: the table's coverage and NEES columns need it
-            table[column] = np.array([e.values[column] for e in estimates])
-    table["valid"] = np.array([e.valid_flags for e in estimates])
-    scores = score(table, sim.truth, skip=0.5)
+    table = table_of(estimates)
+    table["t"] = (table["t"] - t0_wall) * playback_speed + t0_log
+    scores = score(table, sim.truth, ("vx", "vy", "beta", "yaw_rate"), skip=0.5)
     print(f"\n{format_summary(summary)}", file=out)
     print(format_table(scores, f"\naccuracy of {config.estimator.filter} against the simulator's truth"), file=out)
     return scores

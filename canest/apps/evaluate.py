@@ -61,6 +61,14 @@ def read_table(path) -> dict:
     return table
 
 
+def table_of(estimates) -> dict:
+    """Estimates (:class:`canest.estimation.estimate.Estimate`) as the columns :func:`read_table` reads from a
+    replay's CSV: ``t``, every published value and its ``_std``, and ``valid`` (the mask over ``VALID_BITS``)."""
+    names = estimates[0].values if estimates else {}
+    return {"t": np.array([e.t for e in estimates]), "valid": np.array([e.valid_flags for e in estimates]),
+            **{name: np.array([e.values[name] for e in estimates]) for name in names}}
+
+
 # "valid but wrong": more than 3 std off and more than this, in display units
 WRONG_ABOVE = {"vx": 0.5, "vy": 0.5, "beta": 1.0, "yaw_rate": 1.0, **{f"fy_{w}": 300.0 for w in WHEELS},
                **{f"mu_{w}": 0.1 for w in WHEELS}}
