@@ -87,6 +87,23 @@ def test_simulate_gives_the_imu_a_real_car_s_vibration_on_request(tmp_path):
     assert result.returncode == 2 and "--vibration: a scale from 0 to 10" in result.stderr
 
 
+def test_simulate_biases_the_airbag_units_gyro_on_request(tmp_path):
+    """``--gyro-bias-2 2``: the second gyro reads 2 deg/s above the first (whose bias is the simulator's 0.05)."""
+    from canest.codec.decode import InputDecoder
+    from canest.config import DEFAULT_CONFIG, load_config
+
+    decoder = InputDecoder(load_config(DEFAULT_CONFIG))
+    log = tmp_path / "biased.log"
+    canest("simulate", "-m", "step", "--duration", 2, "--gyro-bias-2", 2, "-o", log, "--truth", tmp_path / "t.csv")
+    gyros = {"yaw_rate": [], "yaw_rate_2": []}
+    for msg in can.LogReader(str(log)):
+        for name, value in decoder.decode(msg) or ():
+            gyros.get(name, []).append(value)
+    assert min(map(len, gyros.values())) > 90
+    difference = np.degrees(np.mean(gyros["yaw_rate_2"]) - np.mean(gyros["yaw_rate"]))
+    assert difference == pytest.approx(2.0 - 0.05, abs=0.1)
+
+
 def test_simulate_blows_a_gusty_day_s_side_wind_on_request(tmp_path):
     """``--crosswind 1``: on a straight launch the calm car's sideslip and yaw rate stay zero; gusts move both
     (:mod:`canest.sim.wind`: 180 N in RMS at 80 km/h, the driver steering back onto the lane)."""

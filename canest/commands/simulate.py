@@ -92,6 +92,8 @@ def register(subparsers) -> None:
     car.add_argument("--steering-offset", type=float, metavar="DEG",
                      help="steering wheel angle sensor bias in deg (measured = true + offset; default the sensor's)")
     car.add_argument("--gyro-bias", type=float, metavar="DEG/S", help="yaw rate sensor bias in deg/s (default 0.05)")
+    car.add_argument("--gyro-bias-2", type=float, metavar="DEG/S",
+                     help="the second (airbag unit's) yaw rate sensor's bias in deg/s (default -0.1)")
     car.add_argument("--ay-bias", type=float, metavar="M/S2",
                      help="lateral accelerometer bias in m/s^2 (default -0.03)")
     car.add_argument("--bank", type=float, default=0.0, metavar="DEG",
@@ -165,7 +167,7 @@ def parse_mismatch(args) -> PlantMismatch:
     radians = lambda value: None if value is None else math.radians(value)  # noqa: E731
     return PlantMismatch(scales[0], scales[1], args.steering_ratio_scale, args.wheel_radius_scale,
                          radians(args.steering_offset), radians(args.gyro_bias), args.ay_bias, math.radians(args.bank),
-                         args.roll_gradient, args.pitch_gradient, grade_angle(args.grade))
+                         args.roll_gradient, args.pitch_gradient, grade_angle(args.grade), radians(args.gyro_bias_2))
 
 
 def run(args) -> int:

@@ -4,7 +4,7 @@ The config describes the car as its user believes it is; :class:`PlantMismatch`
 says how the simulated car really is: cornering stiffnesses scaled (the plant's
 Magic Formula tire, :class:`canest.sim.tire.TireParams`), a steering ratio and an
 effective wheel radius off by a factor, sensor biases (steering wheel angle,
-gyro, lateral accelerometer) in place of the defaults of
+gyro, lateral accelerometer, second gyro) in place of the defaults of
 :mod:`canest.sim.sensors`, and a road bank: a constant tilt of the road about
 the car's x axis, positive when the road falls to the left, so that gravity
 pulls the car to the left with ``g sin(bank)`` (which the accelerometer, measuring
@@ -31,7 +31,8 @@ from canest.sim.sensors import DEFAULT_SENSORS, SensorError
 from canest.sim.tire import TireParams
 
 
-BIASED_SENSORS = {"steering_offset": "steering_wheel_angle", "gyro_bias": "yaw_rate", "ay_bias": "ay"}  # field: sensor
+BIASED_SENSORS = {"steering_offset": "steering_wheel_angle", "gyro_bias": "yaw_rate", "ay_bias": "ay",
+                  "gyro_bias_2": "yaw_rate_2"}  # field: sensor
 
 
 @dataclass(frozen=True)
@@ -49,6 +50,7 @@ class PlantMismatch:
     roll_gradient: float | None = None  # deg/g the accelerometers read; None: the config's
     pitch_gradient: float | None = None  # deg/g
     grade: float = 0.0  # rad, positive uphill
+    gyro_bias_2: float | None = None  # rad/s, the second (airbag unit's) gyro's
 
     def tire(self, tire: TireParams = TireParams()) -> TireParams:
         """The plant's tire with the lateral stiffnesses scaled."""
