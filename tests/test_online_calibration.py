@@ -199,7 +199,7 @@ def test_vx_and_the_yaw_rate_carry_the_error_of_the_applied_corrections(learned,
     tick shares, which no consistency test sees. Before, vx was within
     2 std on 64 % of the valid ticks after the scale was applied (NEES 9.5, valid but wrong 2.3 %; now 100 %, 0.88)."""
     pipeline, history, estimates = learned
-    speed, gyro = NAMES.index("speed"), NAMES.index("gyro_bias")
+    speed = NAMES.index("speed")
     applied_at = next(t for t, _, applied, _ in history if applied[speed] != 1.0)
     after = [e for e in estimates if e.t > applied_at + 0.2 and e.valid["vx"]]
     assert len(after) > 1000
@@ -605,6 +605,32 @@ def test_gyro_bias_is_learned_at_a_standstill(config):
     assert calibration.updates["standstill"] > 500 and calibration.updates["kinematic"] == 0
 
 
+def test_a_second_gyro_is_learned_against_the_first_and_corrected_to_agree_with_it(config):
+    """Parked a minute, each gyro with its own bias: the standstill learns the first, the gyros' difference the
+    second (the first considered: unmoved by it); the second is corrected to the first's applied bias less the
+    difference, so that the two agree. A block whose second gyro was stale leaves out that gyro alone."""
+    names = (*NAMES_IN, "yaw_rate_2")
+    n = len(names)
+    calibration = OnlineCalibration(config.vehicle, names, 0.01)
+    rng = np.random.default_rng(1)
+    first, second = math.radians(0.4), math.radians(-1.5)
+    for k in range(6000):
+        values = np.zeros(n)
+        values[names.index("yaw_rate")] = first + math.radians(0.1) * rng.standard_normal()
+        values[names.index("yaw_rate_2")] = second + math.radians(0.2) * rng.standard_normal()
+        stale = np.array([name == "yaw_rate_2" and k % 100 == 7 for name in names])
+        corrected = calibration.correct(Sample(k * 0.01, names, values, stale, np.ones(n, bool), np.zeros(n),
+                                               np.zeros(n, bool)))
+    learned, applied = dict(zip(NAMES, calibration.x)), dict(zip(NAMES, calibration.applied))
+    assert learned["gyro_bias"] == pytest.approx(first, abs=math.radians(0.02))
+    assert learned["gyro_bias_2"] == pytest.approx(second, abs=math.radians(0.03))
+    assert applied["gyro_bias_2"] - applied["gyro_bias"] == pytest.approx(second - first, abs=math.radians(0.03))
+    assert calibration.gyro_difference_std < math.radians(0.02)
+    gyros = [names.index("yaw_rate"), names.index("yaw_rate_2")]
+    assert abs(np.diff(corrected.values[gyros])[0]) < math.radians(0.8)  # one tick's noise, no bias between them
+    assert 400 < calibration.updates["gyros"] < 540  # every block but the ones with a stale second gyro
+
+
 def test_an_accelerometer_reading_high_in_acceleration_teaches_the_ax_offset_not_the_speed_scale(config):
     """A pitching car's ax reads a few percent above the wheels' dv/dt: the longitudinal identity learns the
     difference as the ax offset and leaves the speed scale (the kinematic identity's) alone."""
@@ -923,7 +949,7 @@ def test_an_imu_that_vibrates_as_a_real_cars_teaches_nothing_more_certainly_than
             "steering_offset": level.steering_offset, "ratio": level.steering_ratio_scale,
             "understeer": true_vehicle(config.vehicle, level).understeer_gradient,
             "ax_bias": DEFAULT_SENSORS["ax"].bias, "front": level.stiffness_scale_front,
-            "rear": level.stiffness_scale_rear}
+            "rear": level.stiffness_scale_rear, "gyro_bias_2": level.biases()["gyro_bias_2"]}
     values, std = dict(zip(NAMES, calibration.values)), dict(zip(NAMES, calibration.std))
     print({name: (round(float(values[name]), 5), round(float(std[name]), 5)) for name in NAMES})
     assert calibration.updates["kinematic"] > 200 and calibration.updates["gated"] < 0.05 * sum(
@@ -1014,3 +1040,27 @@ def test_the_learned_stiffness_error_replaces_the_claim_for_linear_tires_only(co
         assert (validity.sideslip_model_std(vehicle, 4.0) < claimed) == learned
     finally:
         pipeline.close()
+
+
+def test_a_second_gyro_far_off_is_learned_against_the_first_and_the_yaw_rate_is_valid_again(config):
+    """An airbag unit's gyro 2 deg/s off (ten times its configured noise): the two gyros disagree, and until the
+    learner corrects the second the yaw rate reads ``inconsistent``, honestly; the learner finds their difference
+    within 30 s and corrects the second gyro to agree with the first as applied; from then on the yaw rate is valid
+    and within its std (:meth:`OnlineCalibration._gyros_update`, ``_follow``). Measured: valid from 49 s of this
+    60 s road, the applied correction 0.01 deg/s from the true difference."""
+    bias = math.radians(2.0)
+    drive = simulate(config, "country", 80.0, 0.85, duration=60.0, seed=3, mismatch=PlantMismatch(gyro_bias_2=bias))
+    pipeline = Pipeline(config)
+    estimates = [e for frame in drive.frames for e in pipeline.feed(frame)]
+    early = [e for e in estimates if 5.0 < e.t - estimates[0].t < 20.0]
+    assert all(e.causes["yaw_rate"] == "inconsistent" for e in early)  # the premise: the gyros disagree
+    calibration = pipeline.calibration
+    applied = dict(zip(NAMES, calibration.applied))
+    difference = bias - PlantMismatch().biases()["gyro_bias"]  # the second gyro's bias less the first's
+    assert applied["gyro_bias_2"] - applied["gyro_bias"] == pytest.approx(difference, abs=math.radians(0.05))
+    assert calibration.updates["gyros"] > 400
+    late = [e for e in estimates if e.t - estimates[0].t > 52.0]
+    assert len(late) > 700 and all(e.valid["yaw_rate"] for e in late)
+    truth = np.interp([e.t for e in late], drive.truth["t"], drive.truth["yaw_rate"])
+    error = np.abs(np.array([e.values["yaw_rate"] for e in late]) - truth)
+    assert np.mean(error < 2.0 * np.array([e.values["yaw_rate_std"] for e in late])) > 0.9

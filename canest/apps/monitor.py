@@ -35,7 +35,7 @@ DEG = 180 / math.pi
 # learned parameter: (display unit, factor from SI); speed, ratio, front and rear are factors on the configured values
 CALIBRATION_UNITS = {"speed": ("x", 1.0), "gyro_bias": ("deg/s", DEG), "ay_bias": ("m/s^2", 1.0),
                      "steering_offset": ("deg", DEG), "ratio": ("x", 1.0), "understeer": ("deg/(m/s^2)", DEG),
-                     "ax_bias": ("m/s^2", 1.0), "front": ("x", 1.0), "rear": ("x", 1.0)}
+                     "ax_bias": ("m/s^2", 1.0), "front": ("x", 1.0), "rear": ("x", 1.0), "gyro_bias_2": ("deg/s", DEG)}
 
 
 def calibration_state(page: dict) -> str:

@@ -22,17 +22,20 @@ from canest.params import VehicleParams
 
 @dataclass
 class Block:
-    """Means of the raw inputs over one block: speed from the wheels (configured radius), yaw rate, ay, ax, swa."""
+    """Means of the raw inputs over one block: speed from the wheels (configured radius), yaw rate, ay, ax, swa,
+    and the second gyro's yaw rate (None where the car sends none, or it was stale or saturated in the block)."""
 
     wheel_speed: float
     yaw_rate: float
     ay: float
     ax: float | None
     steering_wheel_angle: float
+    yaw_rate_2: float | None = None
 
 
 class BlockMeans:
-    """Sums the raw inputs tick by tick; a block with any needed input missing, stale or saturated is dropped."""
+    """Sums the raw inputs tick by tick; a block with any needed input missing, stale or saturated is dropped (the
+    second gyro is not needed: its mean alone is left out)."""
 
     def __init__(self, names: tuple, vehicle: VehicleParams, ticks: int):
         index = {name: i for i, name in enumerate(names)}
@@ -51,6 +54,8 @@ class BlockMeans:
         self.sums = np.zeros(len(self.summed))
         self.count = 0
         self.broken = False
+        self.second_gyro = index.get("yaw_rate_2")
+        self.second_gyro_sum, self.second_gyro_broken = 0.0, False
 
     def add(self, sample):
         """Add one tick; the finished :class:`Block`, or None."""
@@ -59,12 +64,21 @@ class BlockMeans:
             self.broken = True
         else:
             self.sums += sample.values[self.summed]
+        second = self.second_gyro
+        if second is not None:
+            if sample.stale[second] or sample.saturated[second]:
+                self.second_gyro_broken = True
+            else:
+                self.second_gyro_sum += sample.values[second]
         self.count += 1
         if self.count < self.ticks:
             return None
         means, whole = self.sums / self.count, not self.broken
+        yaw_rate_2 = (self.second_gyro_sum / self.count
+                      if second is not None and not self.second_gyro_broken else None)
         self.sums[:] = 0.0
         self.count, self.broken = 0, False
+        self.second_gyro_sum, self.second_gyro_broken = 0.0, False
         if not whole:
             return None
         ay, ax = float(means[5]), float(means[7]) if self.ax is not None else None
@@ -72,4 +86,4 @@ class BlockMeans:
         usage = (tire_usage(means[len(self.used):], self.geometry.loads(ax, ay), self.radius, self.rolling_resistance)
                  if self.torques else (0.0,) * 4)
         wheel_speed = float(slip_free_speed(means[:4], usage, self.radius, self.slip_stiffness))
-        return Block(wheel_speed, float(means[4]), ay, ax, float(means[6]))
+        return Block(wheel_speed, float(means[4]), ay, ax, float(means[6]), yaw_rate_2)

@@ -28,16 +28,16 @@ class Learned:
 
 def parameters(vehicle: VehicleParams, gyro_bias_std: float = 0.0) -> tuple:
     """The learned parameters; the understeer gradient starts at the config's; the speed scale's, the gyro
-    bias's and the cornering stiffnesses' prior never narrower than what the config claims of them
+    biases' and the cornering stiffnesses' prior never narrower than what the config claims of them
     (``vehicle.wheel_radius_uncertainty``, ``estimator.gyro_bias_std``, rad/s,
     ``vehicle.cornering_stiffness_uncertainty``), whose place their learned error takes once applied (the
     stiffnesses': for linear tires, ``Estimator.use_stiffness``)."""
     deg = math.radians(1.0)
     stiffness_std = max(0.3, vehicle.cornering_stiffness_uncertainty)
+    gyro = (0.0, max(0.5 * deg, gyro_bias_std), *BOUNDS["gyro_bias"], 0.01 * deg, 0.15 * deg, 0.1 * deg)
     return (
         Learned("speed", 1.0, max(0.03, vehicle.wheel_radius_uncertainty), *BOUNDS["speed"], 0.001, 0.005, 0.01),
-        Learned("gyro_bias", 0.0, max(0.5 * deg, gyro_bias_std), *BOUNDS["gyro_bias"], 0.01 * deg, 0.15 * deg,
-                0.1 * deg),
+        Learned("gyro_bias", *gyro),
         Learned("ay_bias", 0.0, 0.3, *BOUNDS["ay_bias"], 0.01, 0.05, 0.1),
         Learned("steering_offset", 0.0, 2.0 * deg, *BOUNDS["steering_offset"], 0.05 * deg, 0.2 * deg, 1.0 * deg),
         Learned("ratio", 1.0, 0.1, *BOUNDS["ratio"], 0.002, 0.03, 0.025),
@@ -45,13 +45,15 @@ def parameters(vehicle: VehicleParams, gyro_bias_std: float = 0.0) -> tuple:
         Learned("ax_bias", 0.0, 0.3, -2.0, 2.0, 0.01, 0.03, 0.0),  # reported, not applied: no rate
         Learned("front", 1.0, stiffness_std, 0.5, 2.0, 0.02, 0.05, 0.05),
         Learned("rear", 1.0, stiffness_std, 0.5, 2.0, 0.02, 0.05, 0.05),
+        Learned("gyro_bias_2", *gyro),  # the second gyro's (an airbag unit's), where the car sends one
     )
 
 
-NAMES = ("speed", "gyro_bias", "ay_bias", "steering_offset", "ratio", "understeer", "ax_bias", "front", "rear")
-SPEED, GYRO, AY, OFFSET, RATIO, UNDERSTEER, AX, FRONT, REAR = range(len(NAMES))
+NAMES = ("speed", "gyro_bias", "ay_bias", "steering_offset", "ratio", "understeer", "ax_bias", "front", "rear",
+         "gyro_bias_2")
+SPEED, GYRO, AY, OFFSET, RATIO, UNDERSTEER, AX, FRONT, REAR, GYRO_2 = range(len(NAMES))
 # the steering and lateral offsets are not applied: a bank shows as both; nor ax's: a road's grade moves it faster
 # than a calibration may follow, and the reference speed learns it from the wheels within a second
 # (:mod:`canest.estimation.longitudinal_offset`)
-APPLIED = (SPEED, GYRO, RATIO, FRONT, REAR)
+APPLIED = (SPEED, GYRO, RATIO, FRONT, REAR, GYRO_2)
 STIFFNESS = (FRONT, REAR)  # factors on the configured cornering stiffnesses, learned by the window fit

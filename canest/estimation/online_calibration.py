@@ -27,7 +27,9 @@ only when the drive excites it and the car is steady enough for it to hold:
   to 80 km/h, looped to 80 s) this identity alone learned the scale as 1.033 +- 0.008, applied, vx ran 3 %
   above the car's own speed signal; the kinematic one alone 1.008 +- 0.022. The simulator's IMU does not
   pitch, so there both agree;
-- ``standstill`` (wheels still): ``r_m = b_r``.
+- ``standstill`` (wheels still): ``r_m = b_r``;
+- ``gyros`` (a second gyro mapped, steady yaw rate, any speed): ``r_m - r_m2 = b_r - b_r2`` observes the second
+  gyro's bias ``gyro_bias_2`` (an airbag unit's), the first's *considered* (:meth:`_gyros_update`).
 
 A scalar update whose innovation exceeds ``GATE`` standard deviations is left
 out (a transient or a pothole, not evidence). Each parameter's mean is held in
@@ -37,9 +39,10 @@ The *applied* value (what corrects the inputs the estimator sees) follows the
 learned one, by at most ``rate`` per second, once ``APPLY_EVIDENCE`` s of blocks
 excited it: the learned mean is the best estimate the drive gives (the prior
 shrinks it), so it is applied before it is certain (:meth:`_follow`); the gyro
-bias waits for convergence. The correction acts on the inputs, so every model
-gains from it: wheel speeds times ``speed``, yaw rate less ``gyro_bias``,
-steering angle over ``ratio``. ``ax_bias`` is learned and reported, not applied:
+bias waits for convergence, the second gyro's for its difference to the first's.
+The correction acts on the inputs, so every model gains from it: wheel speeds
+times ``speed``, yaw rates less ``gyro_bias`` and ``gyro_bias_2``, steering
+angle over ``ratio``. ``ax_bias`` is learned and reported, not applied:
 it holds the road's grade, which changes faster than a calibration may follow;
 the reference speed learns ax's offset from the wheels within a second
 (:mod:`canest.estimation.longitudinal_offset`). ``understeer`` is learned and
@@ -71,8 +74,8 @@ from canest.calibration import MODEL_ERROR, RADIUS_DRIFT, STIFFNESS_MODEL_ERROR,
 from canest.estimation.calibration_blocks import Block, BlockMeans
 from canest.estimation.calibration_state import CalibrationStore
 from canest.estimation.inputs import WHEEL_SPEEDS
-from canest.estimation.learned_parameters import (APPLIED, AX, AY, FRONT, GYRO, NAMES, OFFSET, RATIO, REAR, SPEED,
-                                                  STIFFNESS, UNDERSTEER, parameters)
+from canest.estimation.learned_parameters import (APPLIED, AX, AY, FRONT, GYRO, GYRO_2, NAMES, OFFSET, RATIO, REAR,
+                                                  SPEED, STIFFNESS, UNDERSTEER, parameters)
 from canest.estimation.stiffness_window import StiffnessWindow
 from canest.models import identities
 from canest.params import VehicleParams
@@ -101,7 +104,9 @@ REOPEN_AFTER = 3  # window fits gated in a row before the stiffnesses are relear
 FIT_FLOOR = {"front": 0.03, "rear": 0.03, "ratio": 0.02, "steering_offset": math.radians(0.15),
              "gyro_bias": math.radians(0.04), "ay_bias": 0.015, "speed": 0.002}
 NOISE = {"kinematic": 0.1, "steering": math.radians(0.5), "longitudinal": 0.1,  # per block, widened for the
-         "standstill": math.radians(0.05)}  # errors' correlation in time and the identities' model error
+         "standstill": math.radians(0.05), "gyros": math.radians(0.1)}  # errors' correlation in time and the
+# identities' model error; the gyros': a block's mean of two gyros' noise (0.1 and 0.2 deg/s a sample, the second's
+# frames every 20 ms)
 SPREAD_UPDATES = 20  # an identity's innovations averaged into its measured noise (:class:`InnovationSpread`)
 SPREAD_WARMUP = 10  # innovations of an identity seen before it learns: its spread must be known first
 CONSECUTIVE = 1.5  # blocks: two innovations this close in time are consecutive (:class:`InnovationSpread`)
@@ -129,6 +134,7 @@ class OnlineCalibration:
         self.correcting = np.zeros(len(self.specs), dtype=bool)  # applied once (or restored): :attr:`correction_std`
         self._report = None  # built by report() once per block
         self.index = {name: i for i, name in enumerate(names)}
+        self.second_gyro = self.index.get("yaw_rate_2")
         self.enabled = enabled and all(name in self.index for name in NEEDED)
         ticks = max(1, round(BLOCK / dt))
         self.block_period = ticks * dt  # s: BLOCK at tick rates that divide it
@@ -136,7 +142,7 @@ class OnlineCalibration:
         self.history = deque(maxlen=HISTORY + 1)
         self.store = store
         self.last_save = None
-        self.updates = {"kinematic": 0, "steering": 0, "longitudinal": 0, "standstill": 0, "window": 0, "gated": 0}
+        self.updates = {**{kind: 0 for kind in NOISE}, "window": 0, "gated": 0}
         self.window = StiffnessWindow(vehicle, names, dt) if self.enabled else None
         self.gated_fits = 0  # window fits gated in a row
         self.kinematic_offsets = (0.0, 0.0)  # ay, yaw rate: :meth:`_kinematic_offsets`, once per block
@@ -256,6 +262,7 @@ class OnlineCalibration:
         if len(self.history) <= HISTORY:
             return
         first, span = self.history[0], HISTORY * BLOCK
+        self._gyros_update(block, abs(block.yaw_rate - first.yaw_rate) / span < MAX_YAW_ACCELERATION)
         if block.wheel_speed < STANDSTILL and first.wheel_speed < STANDSTILL:
             H = np.zeros(len(self.x))
             H[GYRO] = 1.0
@@ -282,6 +289,23 @@ class OnlineCalibration:
         self._update(block.ay, h, H, NOISE["kinematic"], "kinematic")
         if block.wheel_speed >= MIN_STEER_SPEED:
             self._steering_update(block)
+
+    def _gyros_update(self, block: Block, steady: bool) -> None:
+        """``r_m - r_m2 = b_r - b_r2``: two gyros on one body read one yaw rate, so their difference is their
+        biases'. Only while the yaw rate is ``steady``: the two gyros' frames sample it apart in time (the second's
+        every 20 ms), which in a swerve is a difference of several deg/s. The first gyro's bias is *considered*
+        (:meth:`_update`), not learned: the identities of the car's motion learn it, and the second gyro's error
+        (an airbag unit's, noisier) must not move it; the covariance kept makes every later correction of the
+        first bias carry the second along. The second gyro's bias so learned lets the estimator's models weigh
+        both gyros (:mod:`canest.models.single_track`): unlearned, a second gyro 2 deg/s off made the two disagree
+        beyond their noise, and the yaw rate read ``inconsistent`` for the whole drive (README "Online
+        calibration")."""
+        if block.yaw_rate_2 is None or not steady:
+            return
+        H = np.zeros(len(self.x))
+        H[GYRO], H[GYRO_2] = 1.0, -1.0
+        self._update(block.yaw_rate - block.yaw_rate_2, self.x[GYRO] - self.x[GYRO_2], H, NOISE["gyros"], "gyros",
+                     learns=(GYRO_2,))
 
     def _steering_update(self, block: Block) -> None:
         """``delta_sw = offset + R (k L r / v + u v r)``, ``u = k K_us``, ``r = r_m - b_r``, ``v = s v_w``, while
@@ -414,6 +438,13 @@ class OnlineCalibration:
         learned -0.17 +- 0.09 deg/s within 15 s, applied from 10 s it moved the yaw rate off the car's own signal
         by 0.1 deg/s RMS; on the simulated roads it converges within 60 s, so waiting costs nothing there.
 
+        The second gyro's applied bias heads for the first's *applied* bias less the learned difference of the two
+        (:meth:`_goal`), once that difference is known within ``converged`` after ``APPLY_EVIDENCE`` s: the second
+        gyro is made to agree with the first as corrected, whatever the first's own bias (the config's claim, or its
+        correction's error, covers that one). Its absolute value waits for the first's, which an IMU that vibrates
+        as a real car's held unconverged all of a 120 s road (README "Online calibration"), while the difference
+        was known within 0.01 deg/s.
+
         The steering offset and the lateral offset ``c`` are learned, published and taken by the estimator's
         kinematic checks (:meth:`_kinematic_offsets`), never applied to the inputs: a road's bank shows as both
         (``c`` holds its ``-g sin(bank)``, the offset its steering, :meth:`_steering_update`), and applied as
@@ -422,14 +453,27 @@ class OnlineCalibration:
         made the sideslip RMSE after 60 s 0.183 deg with a std of 0.054 (NEES 7.2, flagged valid); not applied,
         0.092 (NEES 1.5); on the flat road 0.036 and 0.076 (NEES 0.10 and 1.10); without any calibration 0.121
         and 0.098. The offset alone applied: banked 0.056, flat 0.101 (NEES 2.2)."""
-        converged = self.converged
         ready = self.evidence >= APPLY_EVIDENCE
-        ready[GYRO] = converged[GYRO]
+        ready[GYRO] = self.converged[GYRO]
+        ready[GYRO_2] &= self.gyro_difference_std < self.specs[GYRO_2].converged
         for i in APPLIED:
             if ready[i]:
                 self.correcting[i] = True
                 step = self.specs[i].rate * BLOCK
-                self.applied[i] += min(step, max(-step, self.x[i] - self.applied[i]))
+                self.applied[i] += min(step, max(-step, self._goal(i) - self.applied[i]))
+
+    def _goal(self, i: int) -> float:
+        """Where parameter ``i``'s applied value heads: its learned value; the second gyro's bias, the first's
+        applied bias less the learned difference of the two (:meth:`_follow`)."""
+        if i == GYRO_2:
+            return float(self.applied[GYRO] - (self.x[GYRO] - self.x[GYRO_2]))
+        return float(self.x[i])
+
+    @property
+    def gyro_difference_std(self) -> float:
+        """The std of the learned difference of the two gyros' biases (rad/s)."""
+        both = [GYRO, GYRO_2]
+        return math.sqrt(max(float(np.array([1.0, -1.0]) @ self.P[np.ix_(both, both)] @ np.array([1.0, -1.0])), 0.0))
 
     # -- the estimator's side ----------------------------------------------------------------------------------
 
@@ -460,6 +504,8 @@ class OnlineCalibration:
         for wheel in self.blocks.wheels:
             values[wheel] *= a[SPEED]
         values[index["yaw_rate"]] -= a[GYRO]
+        if self.second_gyro is not None:
+            values[self.second_gyro] -= a[GYRO_2]
         swa = index["steering_wheel_angle"]
         values[swa] = float(identities.road_wheel_angle(values[swa], 0.0, a[RATIO]))
         return replace(sample, values=values)
@@ -480,7 +526,9 @@ class OnlineCalibration:
     def correction_std(self) -> tuple:
         """(speed scale, gyro bias): the error of each correction applied to the inputs, ``None`` until it is first
         applied (the config's value and its claimed uncertainty hold until then): its learned std and the distance
-        the rate-limited applied value has still to follow, in quadrature. The inputs carry it whole, and no
+        the rate-limited applied value has still to follow, in quadrature. The gyro bias's is the first gyro's:
+        the second is corrected to agree with it (:meth:`_follow`), within its difference's std, which is below
+        0.15 deg/s when applied and weighs a fifth for the built-in car. The inputs carry it whole, and no
         consistency test sees it: the reference speed and the filter share the scaled wheels, and the filter's
         prior follows the gyro with its bias. Without it, on the wrong car's banked road of
         ``tests/test_online_calibration.py`` (the scale applied at 35 s), vx after the scale was applied was within
