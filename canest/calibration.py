@@ -1,4 +1,5 @@
-"""The parameters canest calibrates: their names, starting values, scales and physical bounds, and a fit's result.
+"""The parameters canest calibrates: their names, starting values, scales and physical bounds, a fit's result, and
+how correlated errors widen its intervals.
 
 Shared by the offline fit (:mod:`canest.models.output_error`), the config writer and
 the simulator's mismatched car (:mod:`canest.sim.mismatch`), so it sits below
@@ -77,3 +78,11 @@ class Fit:
             i = self.names.index(name)
             half_widths[i] = math.hypot(half_widths[i], CONFIDENCE * error * self.values[i])
         return replace(self, half_widths=half_widths)
+
+
+def widening(errors: np.ndarray) -> float:
+    """sqrt((1 + rho) / (1 - rho)) of the lag-1 autocorrelation rho: how much correlated errors widen an interval."""
+    centred = errors - errors.mean()
+    rho = float(np.dot(centred[1:], centred[:-1]) / max(np.dot(centred, centred), 1e-300))
+    rho = min(max(rho, 0.0), 0.999)
+    return math.sqrt((1.0 + rho) / (1.0 - rho))

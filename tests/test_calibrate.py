@@ -84,7 +84,8 @@ def test_recovers_each_parameter_of_the_wrong_config(calibrated):
         _, _, value, half, _ = next(line.split() for line in stdout.splitlines() if line.split()[:1] == [key])
         assert abs(float(value) - getattr(truth, key)) < float(half.removeprefix("+-")), key  # MODEL_ERROR
     offsets = {"steering_wheel_angle": (math.radians(1.5), math.radians(0.2)),
-               "yaw_rate": (math.radians(0.5), math.radians(0.05)), "ay": (0.2, 0.03)}
+               "yaw_rate": (math.radians(0.5), math.radians(0.05)), "ay": (0.2, 0.03),
+               "yaw_rate_2": (WRONG.biases()["gyro_bias_2"], math.radians(0.05))}  # the simulator's airbag unit's
     for signal, (bias, tolerance) in offsets.items():
         got = -fitted.signals[signal].offset  # the offset takes the bias away
         print(f"{signal} bias: true {bias:.5f}, calibrated {got:.5f} (SI)")
@@ -100,7 +101,7 @@ def test_calibrated_config_loads_with_check_and_says_what_it_changed(calibrated)
     result = canest("check", "--config", out)
     assert result.returncode == 0, result.stderr
     text = out.read_text()
-    assert text.count("  # calibrated") == 8  # four vehicle values, the radius's uncertainty, three sensor offsets
+    assert text.count("  # calibrated") == 9  # four vehicle values, the radius's uncertainty, four sensor offsets
     radius = load_config(out).vehicle.wheel_radius_uncertainty  # the fit's 0.1 % and the drift between drives
     assert 0.0 < radius < 0.005  # written: the config claimed 0
     assert "road bank of" in text and "(not a config value)" in text

@@ -1,11 +1,15 @@
 """The output-error fit's model (canest/models/output_error.py) against the same linear single track integrated
 finely with its steering moving between the samples, as a driver's does."""
+import dataclasses
 import math
 
 import numpy as np
+import pytest
 
+from canest.calibration import SHARED, Fit
 from canest.config import load_config
 from canest.models.output_error import STEP, Drive, SingleTrackFit
+from canest.models.second_gyro import with_second_gyro
 from tests.conftest import CONFIG
 
 SPEED = 20.0  # m/s
@@ -76,3 +80,32 @@ def test_a_stretch_never_takes_the_next_stretchs_inputs():
                                                         SingleTrackFit(vehicle, [second]).predict(second, 0, theta))]
     for alone, together in zip(predicted, SingleTrackFit(vehicle, [joined]).predict(joined, 0, theta)):
         np.testing.assert_allclose(together, alone, rtol=0, atol=1e-12)
+
+
+def test_calibrate_gives_the_second_gyros_bias_as_the_first_less_their_steady_mean_difference():
+    """``b_r2 = b_r - mean(r_m - r_m2)`` over steady ticks (canest/models/second_gyro.py): a minute of bends read by
+    an ESC gyro 0.5 deg/s off and an airbag unit's 1.5 deg/s the other way, noisier and 20 ms late; its interval holds
+    the first bias's; a drive without the second gyro leaves the fit as it was."""
+    rng = np.random.default_rng(3)
+    times = np.arange(0.0, 60.0, STEP)
+    yaw = 0.2 * np.sin(2.0 * math.pi * times / 7.0) + 0.3 * (np.abs(times - 30.0) < 2.0)  # bends and one swerve
+    first, second = math.radians(0.5), math.radians(-1.5)
+    late = np.interp(times - 0.02, times, yaw)
+    drive = Drive("two gyros", times, np.zeros_like(times), yaw + first, np.zeros_like(times),
+                  np.full_like(times, SPEED), np.arange(len(times)) == 0,
+                  late + second + math.radians(0.2) * rng.standard_normal(len(times)))
+    names = [p.name for p in SHARED]
+    correlation = np.eye(len(names))
+    correlation[names.index("gyro_bias"), names.index("speed")] = correlation[names.index("speed"),
+                                                                               names.index("gyro_bias")] = 0.5
+    fit = Fit(names, np.array([first if n == "gyro_bias" else 1.0 for n in names]),
+              np.full(len(names), math.radians(0.04)), correlation, {}, 60.0)
+    with_second = with_second_gyro(fit, [drive])
+    assert with_second.value("gyro_bias_2") == pytest.approx(second, abs=math.radians(0.02))
+    assert math.radians(0.04) <= with_second.half_width("gyro_bias_2") < math.radians(0.06)
+    matrix = with_second.correlation
+    assert np.allclose(matrix, matrix.T) and np.allclose(np.diag(matrix), 1.0)
+    assert np.linalg.eigvalsh(matrix).min() > -1e-12
+    assert 0.0 < matrix[-1, names.index("speed")] < 0.5  # the first bias's correlation, carried over
+    one_gyro = dataclasses.replace(drive, yaw_rate_2=None)
+    assert with_second_gyro(fit, [one_gyro]) is fit

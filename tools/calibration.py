@@ -6,6 +6,7 @@
     python tools/calibration.py --online           # the daemon's online calibration over one 120 s road, bank 3 deg
     python tools/calibration.py --online --bank 0 --attitude 4,2   # accelerometers rolling 4 deg/g, pitching 2
     python tools/calibration.py --online --bank 0 --vibration 1    # an IMU vibrating as on a real car
+    python tools/calibration.py --online --bank 0 --gyro-bias-2 2  # the airbag unit's gyro 2 deg/s off
 
 The simulated car differs from the config as issue 17 says (front stiffness x0.7, rear x1.3, steering offset
 1.5 deg, ratio +8 %, gyro bias 0.5 deg/s, ay bias 0.2 m/s^2, wheel radius +3 %); the drives are cached in
@@ -50,7 +51,7 @@ STATES = ("beta", "yaw_rate", "vx")
 # parameter -> (SI to display, display unit, bound: relative (True) or absolute in display units)
 BOUNDS = {"front": (1.0, "x", True), "rear": (1.0, "x", True), "ratio": (1.0, "x", True), "speed": (1.0, "x", True),
           "steering_offset": (math.degrees(1.0), "deg", 0.2), "gyro_bias": (math.degrees(1.0), "deg/s", 0.05),
-          "ay_bias": (1.0, "m/s^2", 0.03)}
+          "ay_bias": (1.0, "m/s^2", 0.03), "gyro_bias_2": (math.degrees(1.0), "deg/s", 0.05)}
 
 
 def drive_files(workdir: Path, name: str, duration: float) -> tuple:
@@ -90,14 +91,17 @@ def rmse(config, log: Path, truth: Path, skip: float = 0.5, on_frame=None, at_en
 
 
 def online(config, duration: float, bank_deg: float, workdir: Path, attitude=(0.0, 0.0), seed: int = 3,
-           vibration: float = 0.0, crosswind: float = 0.0) -> None:
+           vibration: float = 0.0, crosswind: float = 0.0, gyro_bias_2: float | None = None) -> None:
     """The online calibration's learned values over one road, and what it does to the estimates after 60 s;
     ``attitude``: the body's (roll, pitch) gradients in deg/g, which its accelerometers read; ``vibration``: the
-    IMU's (:mod:`canest.sim.sensors`); ``crosswind``: the gusts' scale (:mod:`canest.sim.wind`)."""
+    IMU's (:mod:`canest.sim.sensors`); ``crosswind``: the gusts' scale (:mod:`canest.sim.wind`); ``gyro_bias_2``:
+    the airbag unit's gyro's bias, deg/s (None: the simulator's)."""
     mismatch = dataclasses.replace(WRONG, bank=math.radians(bank_deg), roll_gradient=attitude[0],
-                                   pitch_gradient=attitude[1])
+                                   pitch_gradient=attitude[1],
+                                   gyro_bias_2=None if gyro_bias_2 is None else math.radians(gyro_bias_2))
     name = (f"online-s{seed}-bank{bank_deg:g}" + ("-roll{:g}-pitch{:g}".format(*attitude) if any(attitude) else "")
-            + (f"-vib{vibration:g}" if vibration else "") + (f"-wind{crosswind:g}" if crosswind else ""))
+            + (f"-vib{vibration:g}" if vibration else "") + (f"-wind{crosswind:g}" if crosswind else "")
+            + (f"-gyro2{gyro_bias_2:g}" if gyro_bias_2 is not None else ""))
     log, truth = drive_files(workdir, name, duration)
     if not (log.exists() and truth.exists()):
         print(f"simulating road {seed} ({duration:g} s, bank {bank_deg:+g} deg) ...", file=sys.stderr, flush=True)
@@ -208,10 +212,13 @@ def main() -> None:
     parser.add_argument("--crosswind", type=float, default=0.0,
                         help="with --online: gusts of side wind, scale (default 0: calm; 1: a gusty day's, "
                              "canest.sim.wind)")
+    parser.add_argument("--gyro-bias-2", type=float, metavar="DEG/S",
+                        help="with --online: the airbag unit's gyro's bias (default the simulator's, -0.1)")
     args = parser.parse_args()
     if not args.online and (args.seed != 3 or args.vibration or args.crosswind or args.bank != 3.0
-                            or any(args.attitude)):
-        parser.error("--seed, --vibration, --crosswind, --bank and --attitude choose the road of --online")
+                            or any(args.attitude) or args.gyro_bias_2 is not None):
+        parser.error("--seed, --vibration, --crosswind, --bank, --attitude and --gyro-bias-2 choose the road of "
+                     "--online")
     for option, scale in (("--vibration", args.vibration), ("--crosswind", args.crosswind)):
         if not scale >= 0.0:
             parser.error(f"{option} is a scale of at least 0, got {scale}")
@@ -220,7 +227,7 @@ def main() -> None:
     workdir.mkdir(parents=True, exist_ok=True)
     if args.online:
         online(config, args.duration or 120.0, args.bank, workdir, args.attitude, args.seed, args.vibration,
-               args.crosswind)
+               args.crosswind, args.gyro_bias_2)
         return
     args.duration = args.duration or 60.0
     paths = drives(config, args.duration, workdir)

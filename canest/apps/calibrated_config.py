@@ -32,7 +32,8 @@ from canest.estimation.inputs import WHEEL_SPEEDS
 from canest.settings import Config
 from canest.signals import LINEAR_SPEED_UNITS, normal_unit
 
-SENSOR_OFFSETS = {"steering_wheel_angle": "steering_offset", "yaw_rate": "gyro_bias", "ay": "ay_bias"}
+SENSOR_OFFSETS = {"steering_wheel_angle": "steering_offset", "yaw_rate": "gyro_bias", "ay": "ay_bias",
+                  "yaw_rate_2": "gyro_bias_2"}  # the last where the fit has it (the logs had a second gyro)
 
 
 def calibrated_values(config: Config, fit: Fit) -> dict:
@@ -54,6 +55,8 @@ def calibrated_values(config: Config, fit: Fit) -> dict:
             "between drives"),
     }
     for signal, name in SENSOR_OFFSETS.items():
+        if name not in fit.names:
+            continue
         old = config.signals[signal].offset
         values[("input", "signals", signal, "offset")] = (
             round(old - fit.value(name), 9),

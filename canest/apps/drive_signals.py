@@ -4,11 +4,13 @@ The log is decoded and held exactly as the daemon does it (:class:`canest.codec.
 :class:`canest.resample.Resampler` on the :class:`canest.resample.TickClock` grid at ``STEP`` s), so the
 calibration sees the signals in the config's SI units, offsets applied. A tick where any input the fit needs
 is stale or saturated, or the car drives slower than ``MIN_SPEED``, is left out; the fit restarts its model
-after every such gap (``starts``).
+after every such gap (``starts``). The second gyro's yaw rate, where mapped, rides along (NaN where it is stale
+or saturated): :mod:`canest.models.second_gyro` gives its bias.
 """
 from __future__ import annotations
 
 import logging
+import math
 
 from canest.codec.decode import InputDecoder
 from canest.errors import ConfigError, LogError
@@ -62,7 +64,8 @@ def read_drive(config: Config, path, log_format=None, log_channel=None) -> Drive
                 inputs = TickInputs(leveling.level(resampler.sample(tick)))
                 if inputs.has(*NEEDED):
                     rows.add(tick, *(inputs.values[name] for name in NEEDED[:3]),
-                             wheel_speed(inputs, geometry, config.vehicle))
+                             wheel_speed(inputs, geometry, config.vehicle),
+                             inputs.values["yaw_rate_2"] if inputs.has("yaw_rate_2") else math.nan)
             values = decoder.decode(msg)
             for name, value in values or ():
                 resampler.hold(name, value, msg.timestamp, name in decoder.last_saturated)

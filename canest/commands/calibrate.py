@@ -24,7 +24,8 @@ EPILOG = """examples:
 Fits the linear single-track model to every log at once (output error, scipy
 least squares): each axle's cornering stiffness, the steering ratio and the
 steering angle sensor's offset, the gyro and lateral accelerometer biases, the
-effective wheel radius, and each log's road bank. Each value is printed with
+effective wheel radius, and each log's road bank; where the logs have a second
+gyro (yaw_rate_2), its bias too. Each value is printed with
 its 95 % confidence interval; the stiffnesses' also hold the linear tires' own
 error (5 %, 1 std), the steering ratio's 2 %, which no amount of driving
 averages away. A constant bank cannot be told from an ay bias: the logs' mean
@@ -38,6 +39,7 @@ UNITS = {  # parameter -> (config key or label, unit, factor from the fit's valu
     "front": ("cornering_stiffness_front", "N/rad"), "rear": ("cornering_stiffness_rear", "N/rad"),
     "ratio": ("steering_ratio", "-"), "speed": ("wheel_radius", "m"),
     "steering_offset": ("steering offset", "deg"), "gyro_bias": ("gyro bias", "deg/s"), "ay_bias": ("ay bias", "m/s^2"),
+    "gyro_bias_2": ("second gyro bias", "deg/s"),
 }
 
 
@@ -54,16 +56,17 @@ def register(subparsers) -> None:
 
 
 def parameter_rows(config, fit) -> list:
-    """(label, config value, calibrated value, 95 % half-width, unit) of each shared parameter."""
+    """(label, config value, calibrated value, 95 % half-width, unit) of each shared parameter, and of the second
+    gyro's bias where the logs have one."""
     v = config.vehicle
     bases = {"front": v.cornering_stiffness_front, "rear": v.cornering_stiffness_rear, "ratio": v.steering_ratio,
              "speed": v.wheel_radius}
     rows = []
-    for parameter in SHARED:
-        label, unit = UNITS[parameter.name]
-        value, half = fit.value(parameter.name), fit.half_width(parameter.name)
-        if parameter.name in bases:
-            base = bases[parameter.name]
+    for name in [p.name for p in SHARED] + [n for n in ("gyro_bias_2",) if n in fit.names]:
+        label, unit = UNITS[name]
+        value, half = fit.value(name), fit.half_width(name)
+        if name in bases:
+            base = bases[name]
             rows.append((label, base, base * value, base * half, unit))
         else:
             factor = 1.0 if unit == "m/s^2" else math.degrees(1.0)

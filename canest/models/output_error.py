@@ -20,7 +20,9 @@ linear range too:
 - ``gyro_bias``, ``ay_bias``: the yaw rate and lateral acceleration sensors' (rad/s, m/s^2);
 - ``speed``: the true speed over the wheel speeds times the config's radius: the effective wheel radius's factor;
 - ``bank`` of each log: the road's tilt, positive falling to the left (gravity ``g sin(bank)`` in dvy/dt, not in
-  the measured ay).
+  the measured ay);
+- ``gyro_bias_2``, where the drives have a second gyro: not fitted, given from ``gyro_bias`` by
+  :mod:`canest.models.second_gyro`.
 
 Identifiability (what one drive can tell apart). The steady state of a bend
 says ``(swa - offset) / ratio = L r / v + K_us (ay - ay_bias)`` and
@@ -56,7 +58,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from canest.calibration import BANK, CONFIDENCE, SHARED, Fit
+from canest.calibration import BANK, CONFIDENCE, SHARED, Fit, widening
+from canest.models import second_gyro
 from canest.errors import DependencyError
 from canest.models.wheels import GRAVITY
 from canest.params import VehicleParams
@@ -83,6 +86,7 @@ class Drive:
     ay: np.ndarray  # m/s^2
     wheel_speed: np.ndarray  # m/s: the four wheels' mean (without their drive slip where torques are mapped)
     starts: np.ndarray  # bool: the first tick of a stretch
+    yaw_rate_2: np.ndarray | None = None  # rad/s: the second gyro's (NaN where stale); None: the car sends none
 
     @property
     def seconds(self) -> float:
@@ -94,14 +98,15 @@ class DriveRows:
     out, and the next usable one after a gap starts a new stretch."""
 
     def __init__(self):
-        self.rows = []  # (t, swa, yaw rate, ay, wheel speed, start)
+        self.rows = []  # (t, swa, yaw rate, ay, wheel speed, start, second gyro's yaw rate)
         self.last = None  # t of the last row
 
-    def add(self, t: float, steering_wheel_angle: float, yaw_rate: float, ay: float, wheel_speed: float) -> None:
+    def add(self, t: float, steering_wheel_angle: float, yaw_rate: float, ay: float, wheel_speed: float,
+            yaw_rate_2: float = math.nan) -> None:
         if wheel_speed < MIN_SPEED:
             return
         start = self.last is None or t - self.last > 1.5 * STEP
-        self.rows.append((t, steering_wheel_angle, yaw_rate, ay, wheel_speed, start))
+        self.rows.append((t, steering_wheel_angle, yaw_rate, ay, wheel_speed, start, yaw_rate_2))
         self.last = t
 
     @property
@@ -109,12 +114,14 @@ class DriveRows:
         return len(self.rows) * STEP
 
     def drive(self, path) -> Drive:
-        """The rows as a :class:`Drive`, stretches shorter than ``MIN_SEGMENT`` left out."""
-        table = np.array(self.rows, dtype=float).reshape(-1, 6)
+        """The rows as a :class:`Drive`, stretches shorter than ``MIN_SEGMENT`` left out; its ``yaw_rate_2`` None
+        where no row had the second gyro's."""
+        table = np.array(self.rows, dtype=float).reshape(-1, 7)
         starts = table[:, 5].astype(bool)
         ids = np.cumsum(starts)
         table = table[(np.bincount(ids)[ids] * STEP >= MIN_SEGMENT) & (ids > 0)]
-        return Drive(str(path), *table[:, :5].T, table[:, 5].astype(bool))
+        second = table[:, 6] if np.isfinite(table[:, 6]).any() else None
+        return Drive(str(path), *table[:, :5].T, table[:, 5].astype(bool), second)
 
 
 def turning_ay(drive: Drive) -> np.ndarray:
@@ -229,14 +236,6 @@ def _over_step(values: np.ndarray) -> np.ndarray:
     return 0.5 * (values + following)
 
 
-def _widening(errors: np.ndarray) -> float:
-    """sqrt((1 + rho) / (1 - rho)) of the lag-1 autocorrelation rho: how much correlated errors widen an interval."""
-    centred = errors - errors.mean()
-    rho = float(np.dot(centred[1:], centred[:-1]) / max(np.dot(centred, centred), 1e-300))
-    rho = min(max(rho, 0.0), 0.999)
-    return math.sqrt((1.0 + rho) / (1.0 - rho))
-
-
 def optimizer():
     """scipy.optimize, or a DependencyError naming the extra that installs it (scipy is not a core dependency)."""
     return DependencyError.require("scipy.optimize", "canest calibrate", INSTALL)
@@ -267,8 +266,7 @@ def calibrate(vehicle: VehicleParams, drives: list, progress=None) -> Fit:
         model.weights = {name: 1.0 / max(value, 1e-9) for name, value in rms.items()}
     jac = model.jacobian(solution)
     covariance = np.linalg.pinv(jac.T @ jac)
-    widening = max(_widening(e) for e in errors.values())
-    std = np.sqrt(np.maximum(np.diag(covariance), 0.0)) * widening
+    std = np.sqrt(np.maximum(np.diag(covariance), 0.0)) * max(widening(e) for e in errors.values())
     correlation = covariance / np.outer(*(2 * [np.sqrt(np.maximum(np.diag(covariance), 1e-300))]))
     seconds = float(sum(f.sum() for f in model.fitted) * STEP)
-    return Fit(model.names, solution, CONFIDENCE * std, correlation, rms, seconds)
+    return second_gyro.with_second_gyro(Fit(model.names, solution, CONFIDENCE * std, correlation, rms, seconds), drives)

@@ -146,13 +146,14 @@ def flat_road_offsets(config_vehicle: VehicleParams, mismatch: PlantMismatch) ->
 
 def true_fit(config_vehicle: VehicleParams, mismatch: PlantMismatch, banks=(0.0,)) -> Fit:
     """The calibration that would be exact for this car (intervals 0), in the terms of :mod:`canest.models.output_error`;
-    ``banks`` (rad) per log. Written with :func:`canest.apps.calibrated_config.write_calibrated` it is the right
-    config, the baseline a calibrated one is measured against."""
+    ``banks`` (rad) per log, and the second gyro's bias (:mod:`canest.models.second_gyro`). Written with
+    :func:`canest.apps.calibrated_config.write_calibrated` it is the right config, the baseline a calibrated one is
+    measured against."""
     truth = true_vehicle(config_vehicle, mismatch)
     values = {"front": truth.cornering_stiffness_front / config_vehicle.cornering_stiffness_front,
               "rear": truth.cornering_stiffness_rear / config_vehicle.cornering_stiffness_rear,
               "ratio": mismatch.steering_ratio_scale, "speed": mismatch.wheel_radius_scale,
               **mismatch.biases()}
-    names = [*(p.name for p in SHARED), *(f"bank[{i}]" for i in range(len(banks)))]
-    return Fit(names, np.array([*(values[p.name] for p in SHARED), *banks]), np.zeros(len(names)),
-               np.eye(len(names)), {}, 0.0)
+    names = [*(p.name for p in SHARED), *(f"bank[{i}]" for i in range(len(banks))), "gyro_bias_2"]
+    exact = np.array([*(values[p.name] for p in SHARED), *banks, values["gyro_bias_2"]])
+    return Fit(names, exact, np.zeros(len(names)), np.eye(len(names)), {}, 0.0)
