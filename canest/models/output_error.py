@@ -59,8 +59,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from canest.calibration import BANK, CONFIDENCE, SHARED, Fit, widening
-from canest.models import second_gyro
 from canest.errors import DependencyError
+from canest.models import second_gyro
 from canest.models.wheels import GRAVITY
 from canest.params import VehicleParams
 
