@@ -191,3 +191,15 @@ def test_calibrate_reads_accelerometers_that_tilt_with_the_body_level_when_the_c
              for name, told in (("unaware", config), ("aware", aware))}
     assert speed["aware"] == pytest.approx(WRONG.wheel_radius_scale, abs=0.01)
     assert speed["unaware"] > WRONG.wheel_radius_scale + 0.04
+
+
+def test_a_config_without_a_second_gyro_takes_a_calibration_that_has_its_bias_without_it(tmp_path):
+    """The simulator's exact calibration holds the second gyro's bias; a car whose config maps no second gyro
+    (the production example) gets every other value written and no ``yaw_rate_2`` entry."""
+    config = load_config(ROOT / "configs" / "production_example.yaml")
+    assert "yaw_rate_2" not in config.signals
+    out = tmp_path / "exact.yaml"
+    write_calibrated(config, true_fit(config.vehicle, WRONG), out, ["the true parameters"])
+    written = load_config(out)
+    assert "yaw_rate_2" not in written.signals and "yaw_rate_2" not in out.read_text()
+    assert written.signals["yaw_rate"].offset == pytest.approx(config.signals["yaw_rate"].offset - WRONG.gyro_bias)

@@ -33,7 +33,7 @@ from canest.settings import Config
 from canest.signals import LINEAR_SPEED_UNITS, normal_unit
 
 SENSOR_OFFSETS = {"steering_wheel_angle": "steering_offset", "yaw_rate": "gyro_bias", "ay": "ay_bias",
-                  "yaw_rate_2": "gyro_bias_2"}  # the last where the fit has it (the logs had a second gyro)
+                  "yaw_rate_2": "gyro_bias_2"}  # the last where the fit has it and the config maps the signal
 
 
 def calibrated_values(config: Config, fit: Fit) -> dict:
@@ -55,7 +55,7 @@ def calibrated_values(config: Config, fit: Fit) -> dict:
             "between drives"),
     }
     for signal, name in SENSOR_OFFSETS.items():
-        if name not in fit.names:
+        if name not in fit.names or signal not in config.signals:
             continue
         old = config.signals[signal].offset
         values[("input", "signals", signal, "offset")] = (
