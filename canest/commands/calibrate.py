@@ -8,7 +8,6 @@ from pathlib import Path
 from tqdm import tqdm
 
 from canest.models.output_error import calibrate, optimizer
-from canest.calibration import SHARED
 from canest.apps.calibrated_config import bank_lines, check_new, write_calibrated
 from canest.apps.drive_signals import check_signals, read_drive
 from canest.commands.common import FORMATTER, add_config, add_log_reading, config_from_args, log_reading
@@ -62,7 +61,7 @@ def parameter_rows(config, fit) -> list:
     bases = {"front": v.cornering_stiffness_front, "rear": v.cornering_stiffness_rear, "ratio": v.steering_ratio,
              "speed": v.wheel_radius}
     rows = []
-    for name in [p.name for p in SHARED] + [n for n in ("gyro_bias_2",) if n in fit.names]:
+    for name in (n for n in fit.names if n in UNITS):  # the banks are reported apart
         label, unit = UNITS[name]
         value, half = fit.value(name), fit.half_width(name)
         if name in bases:

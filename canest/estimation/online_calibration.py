@@ -262,7 +262,8 @@ class OnlineCalibration:
         if len(self.history) <= HISTORY:
             return
         first, span = self.history[0], HISTORY * BLOCK
-        self._gyros_update(block, abs(block.yaw_rate - first.yaw_rate) / span < MAX_YAW_ACCELERATION)
+        steady_yaw = abs(block.yaw_rate - first.yaw_rate) / span < MAX_YAW_ACCELERATION
+        self._gyros_update(block, steady_yaw)
         if block.wheel_speed < STANDSTILL and first.wheel_speed < STANDSTILL:
             H = np.zeros(len(self.x))
             H[GYRO] = 1.0
@@ -278,8 +279,7 @@ class OnlineCalibration:
             H[SPEED], H[AX] = speed_rate, 1.0
             self._update(mean_ax, self.x[SPEED] * speed_rate + self.x[AX], H, NOISE["longitudinal"], "longitudinal",
                          learns=(AX,))
-        steady = (abs(block.yaw_rate - first.yaw_rate) / span < MAX_YAW_ACCELERATION and
-                  abs(block.steering_wheel_angle - first.steering_wheel_angle) / span < MAX_STEERING_RATE)
+        steady = steady_yaw and abs(block.steering_wheel_angle - first.steering_wheel_angle) / span < MAX_STEERING_RATE
         if not steady or abs(block.ax or 0.0) > MAX_AX:
             return
         s, bias = self.x[SPEED], self.x[GYRO]
@@ -472,8 +472,8 @@ class OnlineCalibration:
     @property
     def gyro_difference_std(self) -> float:
         """The std of the learned difference of the two gyros' biases (rad/s)."""
-        both = [GYRO, GYRO_2]
-        return math.sqrt(max(float(np.array([1.0, -1.0]) @ self.P[np.ix_(both, both)] @ np.array([1.0, -1.0])), 0.0))
+        P = self.P
+        return math.sqrt(max(float(P[GYRO, GYRO] + P[GYRO_2, GYRO_2] - 2.0 * P[GYRO, GYRO_2]), 0.0))
 
     # -- the estimator's side ----------------------------------------------------------------------------------
 
