@@ -172,7 +172,10 @@ def test_a_damaged_log_is_calibrated_as_far_as_it_reads_with_a_warning_naming_it
 def test_the_simulated_cars_options_are_checked(tmp_path):
     for option, value, says in (("--stiffness-scale", "0.7", "FRONT,REAR"), ("--bank", "40", "degrees from -15"),
                                 ("--wheel-radius-scale", "nan", "a factor from"),
-                                ("--roll-gradient", "-4", "must be at least 0 (0 to 15 deg/g), got -4.0")):
+                                ("--roll-gradient", "-4", "must be at least 0 (0 to 15 deg/g), got -4.0"),
+                                ("--gyro-bias", "nan", "--gyro-bias: deg/s from -5 to 5, got nan"),
+                                ("--gyro-bias-2", "-7", "--gyro-bias-2: deg/s from -5 to 5, got -7.0"),
+                                ("--steering-offset", "31", "deg from -30 to 30"), ("--ay-bias", "inf", "m/s^2 from -2")):
         result = canest("simulate", "--config", CONFIG, "-m", "country", option, value, "-o", tmp_path / "x.log",
                         "--truth", tmp_path / "x.csv")
         assert result.returncode == 2 and says in result.stderr and result.stderr.count("\n") == 1, result.stderr

@@ -7,6 +7,7 @@ import sys
 from tqdm import tqdm
 
 from canest import limits
+from canest.calibration import BOUNDS
 from canest.config import DEFAULT_CONFIG
 from canest.errors import UsageError
 from canest.commands.common import FORMATTER, add_config, config_from_args
@@ -140,6 +141,11 @@ def parse_mu_jump(text):
 SCALE_RANGE = (0.3, 3.0)  # a car's stiffness, ratio or radius off by more is another car
 MAX_BANK_DEG = 15.0
 MAX_GRADE_PCT = 30.0  # steeper is a ramp, not a road
+# sensor bias options: (unit, largest magnitude in that unit): what a calibration may find (canest.calibration)
+SENSOR_BIASES = {"--steering-offset": ("deg", math.degrees(BOUNDS["steering_offset"][1])),
+                 "--gyro-bias": ("deg/s", math.degrees(BOUNDS["gyro_bias"][1])),
+                 "--gyro-bias-2": ("deg/s", math.degrees(BOUNDS["gyro_bias"][1])),
+                 "--ay-bias": ("m/s^2", BOUNDS["ay_bias"][1])}
 
 
 def parse_mismatch(args) -> PlantMismatch:
@@ -155,6 +161,10 @@ def parse_mismatch(args) -> PlantMismatch:
                            ("--wheel-radius-scale", [args.wheel_radius_scale])):
         if not all(low <= v <= high for v in values):  # also refuses nan
             raise UsageError(f"{option}: a factor from {low:g} to {high:g}, got {', '.join(map(str, values))}")
+    for option, (unit, largest) in SENSOR_BIASES.items():
+        value = getattr(args, option[2:].replace("-", "_"))
+        if value is not None and not abs(value) <= largest:  # also refuses nan
+            raise UsageError(f"{option}: {unit} from -{largest:g} to {largest:g}, got {value}")
     if not abs(args.bank) <= MAX_BANK_DEG:
         raise UsageError(f"--bank: degrees from -{MAX_BANK_DEG:g} to {MAX_BANK_DEG:g}, got {args.bank}")
     if not abs(args.grade) <= MAX_GRADE_PCT:
