@@ -34,6 +34,7 @@ SHARED = (
 BOUNDS = {p.name: (p.low, p.high) for p in SHARED}  # name -> (low, high): what a calibration may find
 BANK = Parameter("bank", 0.0, math.radians(0.5), -math.radians(15.0), math.radians(15.0))
 STIFFNESSES = ("front", "rear")
+BOUND_TOLERANCE = 1e-3  # of a parameter's scale: a fitted value this close to a bound is at it
 CONFIDENCE = 1.96  # a 95 % two-sided interval in standard deviations
 # relative, 1 std: how far the linear tires' cornering stiffness read from driving is from the tires' small-slip
 # stiffness, the same in every window and every log, so no amount of driving averages it away (the curve, load
@@ -68,6 +69,22 @@ class Fit:
 
     def half_width(self, name: str) -> float:
         return float(self.half_widths[self.names.index(name)])
+
+    def undetermined(self, prior_std: dict) -> dict:
+        """name -> why the drives do not pin it down, for each parameter but the banks that is: "at its bound"
+        where the fit pressed a shared parameter (:data:`BOUNDS`) against a physical bound (the drives' best value
+        lies beyond it, and the interval, from the Jacobian at the bound, does not hold what it is), "no better known
+        than before driving" where its std is no narrower than ``prior_std[name]`` (the online calibration's prior,
+        in the fit's units: what canest assumes of it without a drive). A straight drive leaves the stiffnesses and
+        the steering so."""
+        scales = {p.name: p.scale for p in SHARED}
+        reasons = {}
+        for name, value, half_width in zip(self.names, self.values, self.half_widths):
+            if name in BOUNDS and min(abs(value - bound) for bound in BOUNDS[name]) < BOUND_TOLERANCE * scales[name]:
+                reasons[name] = "at its bound"
+            elif half_width / CONFIDENCE >= prior_std.get(name, math.inf):
+                reasons[name] = "no better known than before driving"
+        return reasons
 
     def with_model_error(self) -> Fit:
         """A copy whose stiffnesses' and steering ratio's intervals also hold their :data:`MODEL_ERROR`, in

@@ -74,6 +74,7 @@ def test_country_road_is_mixed_driving(drives):
 
 def test_recovers_each_parameter_of_the_wrong_config(calibrated):
     out, stdout = calibrated
+    assert "not pinned down" not in stdout
     config, fitted = load_config(CONFIG), load_config(out)
     truth = true_vehicle(config.vehicle, WRONG)
     for key in ("cornering_stiffness_front", "cornering_stiffness_rear", "steering_ratio", "wheel_radius"):
@@ -157,6 +158,24 @@ def test_errors_name_the_file_and_exit_by_kind(drives, tmp_path):
     assert taken.returncode == 73 and "never replaces" in taken.stderr
     for result in (missing, unreadable, too_little, taken):
         assert result.stderr.count("\n") == 1 and result.stderr.startswith("canest: error: ")
+
+
+def test_a_straight_drive_writes_no_config_and_says_what_it_does_not_pin_down(tmp_path):
+    """A launch (straight, the steering wheel at zero) cannot tell the stiffnesses or the steering ratio: the fit
+    runs the front stiffness to its bound and leaves the ratio as unknown as the online calibration's prior. The
+    fit is printed with those rows marked, and --out writes nothing (before, it wrote a config with the guesses)."""
+    log = tmp_path / "launch.log"
+    assert canest("simulate", "--config", CONFIG, "-m", "launch", "--duration", 20, "-o", log,
+                  "--truth", tmp_path / "launch.csv").returncode == 0
+    out = tmp_path / "launch.yaml"
+    result = canest("calibrate", log, "--config", CONFIG, "--out", out)
+    assert result.returncode == 65 and not out.exists()
+    assert result.stderr.count("\n") == 1 and result.stderr.startswith("canest: error: ")
+    for said in (str(log), "launch.yaml not written", "cornering_stiffness_front (at its bound)",
+                 "steering_ratio (no better known than before driving)"):
+        assert said in result.stderr, result.stderr
+    marked = {line.split()[0] for line in result.stdout.splitlines() if "not pinned down" in line}
+    assert {"cornering_stiffness_front", "steering_ratio"} <= marked and "gyro" not in marked, result.stdout
 
 
 def test_a_damaged_log_is_calibrated_as_far_as_it_reads_with_a_warning_naming_it(drives, tmp_path):

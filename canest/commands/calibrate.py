@@ -13,6 +13,8 @@ from canest.apps.drive_signals import check_signals, read_drive
 from canest.commands.common import FORMATTER, add_config, add_log_reading, config_from_args, log_reading
 from canest.commands.replay import warnings_to_stderr
 from canest.config import DEFAULT_CONFIG
+from canest.errors import LogError
+from canest.estimation.learned_parameters import parameters
 from canest.io.logfiles import expand_logs
 from canest.io.outputs import check_outputs
 
@@ -32,7 +34,12 @@ bank is taken as 0 (drive a road both ways, or flat roads; one log: its bank
 is 0). Best data: a few minutes of country road at 50-100 km/h,
 bends of both directions, straights, braking and accelerating, below 4 m/s^2
 of lateral acceleration. --out writes the config with the calibrated values,
-each commented (never over an existing file); `canest check --config` loads it."""
+each commented (never over an existing file); `canest check --config` loads it.
+A parameter the logs do not pin down is marked: "at its bound" (the fit ran to
+the edge of its physical range) or "no better known than before driving" (its
+std no narrower than the prior the online calibration starts from); a straight
+drive leaves the stiffnesses and the steering so. --out then writes nothing
+and says which (exit 65)."""
 
 UNITS = {  # parameter -> (config key or label, unit, factor from the fit's value)
     "front": ("cornering_stiffness_front", "N/rad"), "rear": ("cornering_stiffness_rear", "N/rad"),
@@ -55,8 +62,8 @@ def register(subparsers) -> None:
 
 
 def parameter_rows(config, fit) -> list:
-    """(label, config value, calibrated value, 95 % half-width, unit) of each shared parameter, and of the second
-    gyro's bias where the logs have one."""
+    """(name, label, config value, calibrated value, 95 % half-width, unit) of each shared parameter, and of the
+    second gyro's bias where the logs have one."""
     v = config.vehicle
     bases = {"front": v.cornering_stiffness_front, "rear": v.cornering_stiffness_rear, "ratio": v.steering_ratio,
              "speed": v.wheel_radius}
@@ -66,10 +73,10 @@ def parameter_rows(config, fit) -> list:
         value, half = fit.value(name), fit.half_width(name)
         if name in bases:
             base = bases[name]
-            rows.append((label, base, base * value, base * half, unit))
+            rows.append((name, label, base, base * value, base * half, unit))
         else:
             factor = 1.0 if unit == "m/s^2" else math.degrees(1.0)
-            rows.append((label, 0.0, value * factor, half * factor, unit))
+            rows.append((name, label, 0.0, value * factor, half * factor, unit))
     return rows
 
 
@@ -78,11 +85,31 @@ def format_fit(config, fit, logs: list) -> list:
     lines = [f"calibrated {config.vehicle.name} over {len(logs)} log(s), {fit.seconds:.0f} s of driving; residual "
              f"RMS yaw rate {math.degrees(fit.rms['yaw_rate']):.3f} deg/s, ay {fit.rms['ay']:.3f} m/s^2",
              f"  {'parameter':<28} {'config':>12} {'calibrated':>12} {'95 % CI':>12}  unit"]
-    for label, base, value, half, unit in parameter_rows(config, fit):
-        lines.append(f"  {label:<28} {base:>12.6g} {value:>12.6g} {'+-' + format(half, '.3g'):>12}  {unit}")
+    undetermined = undetermined_parameters(config, fit)
+    for name, label, base, value, half, unit in parameter_rows(config, fit):
+        note = f"  (not pinned down: {undetermined[name]})" if name in undetermined else ""
+        lines.append(f"  {label:<28} {base:>12.6g} {value:>12.6g} {'+-' + format(half, '.3g'):>12}  {unit}{note}")
     lines += bank_lines(fit, logs)
     lines.append("  (the logs' mean bank is held at 0: a constant bank cannot be told from an ay bias)")
     return lines
+
+
+def undetermined_parameters(config, fit) -> dict:
+    """name -> why the logs do not pin it down (:meth:`canest.calibration.Fit.undetermined`), against the prior the
+    online calibration starts from for this config."""
+    return fit.undetermined({p.name: p.std for p in parameters(config.vehicle, config.estimator.gyro_bias_std)})
+
+
+def refuse_undetermined(config, fit, logs: list, out) -> None:
+    """A LogError (65) naming the parameters the logs do not pin down: a config holding them would take a guess
+    for a measurement."""
+    undetermined = undetermined_parameters(config, fit)
+    if undetermined:
+        named = [f"{label} ({undetermined[name]})" for name, label, *_ in parameter_rows(config, fit)
+                 if name in undetermined]
+        raise LogError(f"{', '.join(map(str, logs))}: {out} not written: the drive does not pin down "
+                       f"{', '.join(named)}; calibrate over driving with bends of both directions, straights, "
+                       "braking and accelerating (see --help)")
 
 
 def run(args) -> int:
@@ -105,6 +132,7 @@ def run(args) -> int:
     lines = format_fit(config, fit, args.logs)
     print("\n".join(lines))
     if args.out:
+        refuse_undetermined(config, fit, args.logs, args.out)
         header = [f"canest calibrate of {Path(config.path).name} over {', '.join(map(str, args.logs))}", *lines]
         write_calibrated(config, fit, args.out, header)
         print(f"wrote the calibrated config to {args.out}")
