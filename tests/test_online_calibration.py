@@ -795,6 +795,28 @@ def test_a_corrupt_or_implausible_state_is_ignored_with_one_warning_naming_the_f
     assert np.array_equal(calibration.x, np.array([p.start for p in parameters(config.vehicle)]))
 
 
+def test_a_file_that_is_no_calibration_state_is_kept_aside_and_never_written_over(config, tmp_path, caplog):
+    """A config named as the state file by mistake survives as ``NAME.unreadable`` (the next one ``.unreadable.1``);
+    a canest state with implausible values is the learner's own and is replaced."""
+    path = tmp_path / "calibration.json"
+    for kept, text in (("calibration.json.unreadable", "vehicle:\n  mass: 1845\n"),
+                       ("calibration.json.unreadable.1", '{"version": 7, "parameters": {}}')):
+        path.write_text(text)
+        with caplog.at_level(logging.WARNING, logger="canest"):
+            calibration = OnlineCalibration(config.vehicle, NAMES_IN, 0.01, CalibrationStore(path))
+            calibration.close()
+        assert (tmp_path / kept).read_text() == text
+        assert any(f"kept it as {tmp_path / kept}" in r.getMessage() for r in caplog.records)
+        assert json.loads(path.read_text())["version"] == 1
+    state = OnlineCalibration(config.vehicle, NAMES_IN, 0.01).state()
+    state["speed"]["value"] = 9.0
+    CalibrationStore(path).save(state)
+    OnlineCalibration(config.vehicle, NAMES_IN, 0.01, CalibrationStore(path)).close()
+    assert json.loads(path.read_text())["parameters"]["speed"]["value"] == 1.0
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["calibration.json", "calibration.json.unreadable",
+                                                         "calibration.json.unreadable.1"]
+
+
 # -- config ------------------------------------------------------------------------------------------------------------
 
 def write_config(tmp_path, estimator: dict):
@@ -835,6 +857,28 @@ def test_replay_state_file_option_learns_and_saves(drive, tmp_path):
     saved = json.loads(state.read_text())["parameters"]
     assert saved["speed"]["value"] == pytest.approx(WRONG.wheel_radius_scale, abs=0.01)
     assert saved["speed"]["evidence"] > 10.0
+
+
+@pytest.mark.parametrize("command", ["replay", "run"])
+def test_a_state_file_naming_an_input_or_a_folder_is_refused_before_anything_is_written(drive, tmp_path, command):
+    """The state file is written over: naming the config (or the replayed log) by it would destroy it."""
+    log = tmp_path / "drive.log"
+    drive.write_log(log)
+    config = tmp_path / "car.yaml"
+    config.write_text(CONFIG.read_text())  # its DBCs are built in
+    before = config.read_bytes()
+    first = [command, str(log)] if command == "replay" else [command]
+    for state, status, says in ((config, 2, "that is the config"), (tmp_path, 73, "that is a folder")):
+        result = subprocess.run([sys.executable, "-m", "canest", *first, "--config", str(config), "--state-file",
+                                 str(state), "--quiet" if command == "replay" else "--log-level=ERROR"],
+                                capture_output=True, text=True, timeout=120, cwd=ROOT)
+        assert result.returncode == status and says in result.stderr and "--state-file" in result.stderr, \
+            result.stderr
+    assert config.read_bytes() == before
+    replayed = subprocess.run([sys.executable, "-m", "canest", "replay", str(log), "--config", str(config),
+                               "--state-file", str(log), "--quiet"], capture_output=True, text=True, timeout=120,
+                              cwd=ROOT)
+    assert replayed.returncode == 2 and "that is the input log" in replayed.stderr
 
 
 def test_run_takes_a_state_file_and_the_units_keep_it_in_their_state_directory():

@@ -15,6 +15,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import sys
+from pathlib import Path
 
 FORMATTER = argparse.RawDescriptionHelpFormatter
 CONFIG_SUFFIXES = (".yaml", ".yml")
@@ -75,6 +76,20 @@ def add_state_file(parser) -> None:
     parser.add_argument("--state-file", metavar="PATH",
                         help="the online calibration's state: reloaded at start, saved every minute and at the end "
                              "(overrides estimator.state_file; README \"Online calibration\")")
+
+
+def state_file_output(config, args) -> dict:
+    """The online calibration's state file as an output of the run (it is written over: :func:`check_outputs` keeps
+    it off the run's inputs), under the option or config key that named it; an OutputFileError (73) for a folder."""
+    from canest.errors import OutputFileError
+
+    path = config.estimator.state_file
+    if not path:
+        return {}
+    named = "--state-file" if getattr(args, "state_file", None) else "estimator.state_file"
+    if Path(path).is_dir():
+        raise OutputFileError(f"{named} {path}: that is a folder; name the calibration state file in it")
+    return {named: path}
 
 
 def add_log_reading(parser) -> None:

@@ -14,7 +14,7 @@ from canest.errors import LogError, UsageError
 from canest.io.bus import open_bus
 from canest.io.outputs import check_outputs, is_stdio
 from canest.commands.common import (FORMATTER, add_bus_overrides, add_config, add_log_reading, add_state_file,
-                                    config_from_args, log_reading)
+                                    config_from_args, log_reading, state_file_output)
 from canest.pipeline import format_summary
 from canest.apps.replay import play, replay
 
@@ -159,7 +159,7 @@ def run(args) -> int:
         return 0
     if not (args.out or args.csv or args.json):
         print("note: neither --out nor --csv given; only the frame summary is printed", file=sys.stderr)
-    check_outputs({"--out": args.out, "--csv": args.csv},
+    check_outputs({"--out": args.out, "--csv": args.csv, **state_file_output(config, args)},
                   {"the input log": args.log, "the config": args.config or DEFAULT_CONFIG,
                    "the input DBC": config.input_dbc, "the output DBC": config.output_dbc})
     with StopRequest().on_signals() as stop:

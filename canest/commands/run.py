@@ -5,7 +5,10 @@ import sys
 from contextlib import ExitStack
 
 from canest.apps import journal
-from canest.commands.common import FORMATTER, add_bus_overrides, add_config, add_state_file, config_from_args
+from canest.commands.common import (FORMATTER, add_bus_overrides, add_config, add_state_file, config_from_args,
+                                    state_file_output)
+from canest.config import DEFAULT_CONFIG
+from canest.io.outputs import check_outputs
 from canest.io.sinks import CsvSink
 from canest.pipeline import format_summary
 from canest.apps.service import Service
@@ -45,6 +48,9 @@ def register(subparsers) -> None:
 
 def run(args) -> int:
     config = config_from_args(args)
+    check_outputs({"--csv": args.csv, **state_file_output(config, args)},
+                  {"the config": args.config or DEFAULT_CONFIG, "the input DBC": config.input_dbc,
+                   "the output DBC": config.output_dbc})
     journal.setup(args.log_level)
     with ExitStack() as stack:
         sinks = [stack.enter_context(CsvSink(args.csv))] if args.csv else []

@@ -8,9 +8,12 @@ never half of either. :meth:`CalibrationStore.load` multiplies every variance by
 ``RELOAD_INFLATION`` (the car may have changed while off: tires, load, a
 steering alignment); a file that cannot be read, is not the format, or holds a
 value outside its parameter's bounds is ignored with one warning naming the
-file, and learning starts afresh. A parameter the file does not hold (one a
-newer canest learns than the one that wrote it) starts from its prior, the
-others are restored, and one line says which.
+file, and learning starts afresh. A file that is no calibration state at all
+(not JSON, or no ``version`` of this format: a config or a log named by
+mistake) is never written over: the first save moves it aside to
+``NAME.unreadable`` (``.unreadable.1``, ... if taken) and says so. A parameter
+the file does not hold (one a newer canest learns than the one that wrote it)
+starts from its prior, the others are restored, and one line says which.
 """
 from __future__ import annotations
 
@@ -33,11 +36,16 @@ class CalibrationStore:
     def __init__(self, path, interval: float = SAVE_INTERVAL):
         self.path = Path(path)
         self.interval = interval
+        self.foreign = False  # the file at ``path`` is no calibration state (:meth:`load`): moved aside before a save
 
     def save(self, parameters: dict) -> None:
-        """Write ``parameters`` (name -> FIELDS) atomically: temporary file, fsync, rename."""
+        """Write ``parameters`` (name -> FIELDS) atomically: temporary file, fsync, rename; a file that is no
+        calibration state moved aside first (module docstring)."""
         text = json.dumps({"version": VERSION, "parameters": parameters}, indent=1, sort_keys=True)
         self.path.parent.mkdir(parents=True, exist_ok=True)
+        if self.foreign and self.path.exists():
+            self._move_aside()
+        self.foreign = False
         handle, temporary = tempfile.mkstemp(prefix=f".{self.path.name}.", suffix=".tmp", dir=self.path.parent)
         try:
             with os.fdopen(handle, "w") as stream:
@@ -49,15 +57,33 @@ class CalibrationStore:
             Path(temporary).unlink(missing_ok=True)
             raise
 
+    def _move_aside(self) -> None:
+        kept = self.path.with_name(f"{self.path.name}.unreadable")
+        number = 0
+        while kept.exists():
+            number += 1
+            kept = self.path.with_name(f"{self.path.name}.unreadable.{number}")
+        os.replace(self.path, kept)
+        log.warning("%s was no calibration state; kept it as %s and saved the calibration in its place", self.path,
+                    kept)
+
+    def _ignored(self, reason) -> None:
+        log.warning("ignoring the calibration state file %s: %s; learning from scratch", self.path, reason)
+
     def load(self, specs) -> dict | None:
         """The saved parameters with variances times ``RELOAD_INFLATION``, or None (no file; or unusable: warned)."""
         if not self.path.exists():
             return None
         try:
-            parameters = _checked(json.loads(self.path.read_text()), specs)
-        except (OSError, UnicodeDecodeError, ValueError) as exc:
-            log.warning("ignoring the calibration state file %s: %s; learning from scratch", self.path, exc)
-            return None
+            document = json.loads(self.path.read_text())
+        except (OSError, UnicodeDecodeError, ValueError) as exc:  # a JSONDecodeError is a ValueError
+            self.foreign = True
+            return self._ignored(exc)
+        self.foreign = not (isinstance(document, dict) and document.get("version") == VERSION)
+        try:
+            parameters = _checked(document, specs)
+        except ValueError as exc:
+            return self._ignored(exc)
         missing = [spec.name for spec in specs if spec.name not in parameters]
         if missing:
             log.info("%s holds no %s (written by an older canest): learning them from their prior", self.path,
