@@ -208,13 +208,43 @@ def test_missing_optional_packages_exit_69_naming_the_remedy(drive, tmp_path):
     (tmp_path / "truth.csv").write_text((tmp_path / "est.csv").read_text())
     one_line_error(canest_blocking("matplotlib", "evaluate", tmp_path / "est.csv", tmp_path / "truth.csv", "--plot",
                                    tmp_path / "p.png"), 69, "--plot needs the Python package 'matplotlib'",
-                   "pip install matplotlib")
+                   "pip install 'canest[plot]'")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["est.csv", "truth.csv"]
 
 
 def test_evaluate_inputs_missing_exit_66(tmp_path):
     one_line_error(canest("evaluate", tmp_path / "est.csv", tmp_path / "truth.csv"), 66,
                    f"{tmp_path / 'est.csv'}: cannot read: No such file or directory")
+
+
+def test_a_damaged_csv_is_one_line_naming_file_and_line_a_torn_row_a_warning(drive, tmp_path):
+    """evaluate (and compare, batch: one reader) on CSVs a user may give: before, each of these but the missing
+    file ended in a traceback (IndexError, TypeError, UnicodeDecodeError)."""
+    estimate, truth = tmp_path / "est.csv", tmp_path / "truth.csv"
+    assert canest("simulate", "-m", "dlc", "--duration", "2", "-o", tmp_path / "d.log", "--truth", truth).returncode == 0
+    assert canest("replay", tmp_path / "d.log", "--csv", estimate, "-q").returncode == 0
+    lines = estimate.read_text().splitlines(keepends=True)
+    torn = tmp_path / "torn.csv"
+    torn.write_text("".join(lines[:150]) + "1.5,22.2\n" + "".join(lines[150:]))
+    result = canest("evaluate", torn, truth)
+    assert result.returncode == 0 and "yaw_rate" in result.stdout
+    assert result.stderr.startswith(f"canest: warning: {torn}: left out 1 line(s)") and "line 151, 2 fields" in \
+        result.stderr and result.stderr.count("\n") == 1
+    text = tmp_path / "text.csv"
+    text.write_text("".join(lines[:150]) + lines[150].replace(lines[150].split(",")[1], "abc", 1) + "".join(lines[151:]))
+    one_line_error(canest("evaluate", text, truth), 65, f"{text}:151: column 'vx' holds 'abc' where its other rows")
+    binary = tmp_path / "binary.csv"
+    binary.write_bytes(b"t,vx\n\xff\xfe\x00\x01\n")
+    one_line_error(canest("evaluate", estimate, binary), 65, f"{binary}: not a text CSV")
+    header_only = tmp_path / "header.csv"
+    header_only.write_text(lines[0])
+    one_line_error(canest("evaluate", estimate, header_only), 65, f"{header_only}: no rows under the header")
+    one_line_error(canest("evaluate", truth, estimate), 2, "the arguments look swapped")
+    one_line_error(canest("compare", tmp_path / "d.log", text), 65, f"{text}:151: column 'vx'")
+    one_line_error(canest("compare", tmp_path / "d.log", tmp_path / "none.csv"), 66, "none.csv: cannot read")
+    for command in (("evaluate", estimate, truth), ("compare", tmp_path / "d.log", truth)):
+        one_line_error(canest(*command, "--plot", tmp_path / "p.txt"), 2, "--plot", "cannot write '.txt' files")
+    assert not (tmp_path / "p.txt").exists()
 
 
 @pytest.mark.parametrize("speed", ["0", "-20", "nan"])

@@ -18,16 +18,19 @@ validity bit needs to know (all over the scored ticks):
 from __future__ import annotations
 
 import csv
+import logging
 import math
 import sys
 from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from canest.errors import TableError
+from canest.errors import InputFileError, TableError
 from canest.estimation.estimate import VALID_BITS
 from canest.io.outputs import is_stdio
 from canest.signals import WHEELS
+
+log = logging.getLogger("canest.evaluate")
 
 # state -> (display unit, factor from SI)
 DISPLAY = {
@@ -41,24 +44,61 @@ DISPLAY = {
 
 
 def read_table(path) -> dict:
-    """A CSV with a header as {column: np.ndarray}; non-numeric columns are kept as strings; ``-`` is stdin."""
-    with (open(sys.stdin.fileno(), newline="", closefd=False) if is_stdio(path) else open(path, newline="")) as handle:
-        reader = csv.reader(handle)
-        try:
-            header = next(reader)
-        except StopIteration:
-            raise TableError(f"{path}: empty file") from None
-        rows = list(reader)
+    """A CSV with a header as {column: np.ndarray}; non-numeric columns are kept as strings; ``-`` is stdin.
+
+    A TableError (65) names the file, and the line where one is to blame, for what cannot be scored: no text, no
+    header, no ``t`` column, no row, a text cell in a column of numbers (an empty cell there is nan). Rows whose
+    field count is not the header's (a file cut mid-write) are left out with one warning naming the file, the
+    first such line and how many; a file that does not exist or may not be read is an InputFileError (66)."""
+    try:
+        with (open(sys.stdin.fileno(), newline="", closefd=False) if is_stdio(path)
+              else open(path, newline="", encoding="utf-8")) as handle:
+            reader = csv.reader(handle)
+            header = next(reader, None)
+            rows, torn = [], []
+            for row in reader:
+                (rows if len(row) == len(header) else torn).append((reader.line_num, row))
+    except UnicodeDecodeError as exc:
+        raise TableError(f"{path}: not a text CSV (byte {exc.start} is not UTF-8): name a CSV such as canest replay "
+                         "--csv or canest simulate --truth writes") from None
+    except OSError as exc:
+        raise InputFileError(f"{path}: cannot read: {exc.strerror or exc}; name an existing CSV this user may read") \
+            from None
+    if header is None:
+        raise TableError(f"{path}: empty file")
     if "t" not in header:
         raise TableError(f"{path}: no 't' column in header {header}")
-    table = {}
-    for i, name in enumerate(header):
-        column = [row[i] for row in rows]
-        try:
-            table[name] = np.array(column, dtype=float)
-        except ValueError:
-            table[name] = np.array(column)
+    if torn:
+        line, row = torn[0]
+        log.warning("%s: left out %d line(s) whose field count is not the header's %d (first: line %d, %d fields; "
+                    "a file cut mid-write?)", path, len(torn), len(header), line, len(row))
+    if not rows:
+        raise TableError(f"{path}: no rows under the header")
+    table = {name: _column(path, name, [(line, row[i]) for line, row in rows]) for i, name in enumerate(header)}
+    if table["t"].dtype.kind != "f":
+        raise TableError(f"{path}: the 't' column holds no numbers")
     return table
+
+
+def _column(path, name: str, cells: list) -> np.ndarray:
+    """One column's cells ``(line, text)`` as floats, or as strings where no cell is a number (``mode``,
+    ``why_*``); a TableError naming the line of a text cell among numbers."""
+    try:
+        return np.array([text for _, text in cells], dtype=float)
+    except ValueError:
+        pass
+    numbers, texts = [], []
+    for line, text in cells:
+        try:
+            numbers.append(float(text) if text.strip() else math.nan)
+        except ValueError:
+            texts.append((line, text))
+    if len(texts) + sum(1 for _, text in cells if not text.strip()) == len(cells):  # no cell is a number
+        return np.array([text for _, text in cells])
+    if not texts:
+        return np.array(numbers)
+    line, text = texts[0]
+    raise TableError(f"{path}:{line}: column '{name}' holds {text!r} where its other rows hold numbers")
 
 
 def table_of(estimates) -> dict:

@@ -11,7 +11,7 @@ from pathlib import Path
 from canest.apps.batch import CONNECT_TIMEOUT_S, Stop, run_batch
 from canest.apps.batch_plan import FLEET_SUMMARY
 from canest.apps.fleet_report import fleet_json, fleet_table, plot_errors, totals
-from canest.commands.common import FORMATTER, add_config, add_log_reading, config_from_args, log_reading
+from canest.commands.common import FORMATTER, add_config, add_log_reading, check_plot, config_from_args, log_reading
 from canest.apps.compare import runnable
 from canest.errors import DependencyError
 
@@ -82,7 +82,7 @@ def stop_on_signals(stop: Stop):
 def run(args) -> int:
     DependencyError.require("dask.distributed", "canest batch", "pip install 'canest[fleet]'")
     if args.plot:  # before the batch, not after it
-        DependencyError.require("matplotlib", "--plot", "pip install 'canest[plot]'")
+        check_plot(args.plot)
     config = config_from_args(args)
     filters = runnable(config, args.filters) if args.filters else [config.estimator.filter]
     say = print if not args.json else lambda *line: print(*line, file=sys.stderr)

@@ -92,6 +92,21 @@ def state_file_output(config, args) -> dict:
     return {named: path}
 
 
+def check_plot(path) -> None:
+    """``--plot PATH``, before any work: matplotlib installed (a DependencyError, 69) and a format it writes by the
+    name's suffix (a UsageError, 2; no suffix: PNG, matplotlib's default)."""
+    from canest.errors import DependencyError, UsageError
+
+    DependencyError.require("matplotlib", "--plot", "pip install 'canest[plot]'")
+    from matplotlib.figure import Figure
+
+    formats = Figure().canvas.get_supported_filetypes()
+    suffix = Path(path).suffix.lower().removeprefix(".")
+    if suffix and suffix not in formats:
+        raise UsageError(f"--plot {path}: matplotlib cannot write '.{suffix}' files; name a .png (or "
+                         f"{', '.join(f'.{name}' for name in sorted(formats) if name != 'png')})")
+
+
 def add_log_reading(parser) -> None:
     """--format and --log-channel: how a log is read where its name and content do not settle it."""
     from canest.io.logfiles import STREAM_FORMATS

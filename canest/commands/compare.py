@@ -4,10 +4,10 @@ from __future__ import annotations
 import json
 import sys
 
-from canest.commands.common import FORMATTER, add_config, add_log_reading, config_from_args, log_reading
+from canest.commands.common import FORMATTER, add_config, add_log_reading, check_plot, config_from_args, log_reading
+from canest.commands.replay import warnings_to_stderr
 from canest.apps.compare import comparison_json, format_comparison, plot_comparison, run_filter, runnable
 from canest.apps.evaluate import read_table
-from canest.errors import DependencyError
 
 EPILOG = """examples:
   canest simulate --maneuver dlc --speed 80 --mu 0.85 -o dlc.log --truth dlc.csv
@@ -38,7 +38,8 @@ def register(subparsers) -> None:
 
 def run(args) -> int:
     if args.plot:  # before the replays, not after them
-        DependencyError.require("matplotlib", "--plot", "pip install 'canest[plot]'")
+        check_plot(args.plot)
+    warnings_to_stderr()  # a damaged log's or truth CSV's warnings
     config = config_from_args(args)
     names = runnable(config, args.filters)
     truth = read_table(args.truth)

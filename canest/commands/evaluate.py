@@ -3,8 +3,9 @@ from __future__ import annotations
 
 import json
 
-from canest.errors import DependencyError, InputFileError, TableError, UsageError
-from canest.commands.common import FORMATTER
+from canest.errors import TableError, UsageError
+from canest.commands.common import FORMATTER, check_plot
+from canest.commands.replay import warnings_to_stderr
 from canest.apps.evaluate import DISPLAY, align, as_json, format_table, plot, read_table, score
 from canest.io.outputs import OutputFile, check_outputs
 
@@ -39,14 +40,6 @@ def register(subparsers) -> None:
     p.set_defaults(func=run)
 
 
-def read_input(path) -> dict:
-    try:
-        return read_table(path)
-    except OSError as exc:
-        raise InputFileError(f"{path}: cannot read: {exc.strerror or exc}; name an existing CSV this user may read") \
-            from None
-
-
 def parse_align(words: list) -> tuple:
     """``['first']``, ``['none']`` or ``['offset', SECONDS]`` -> (mode, seconds)."""
     if words in (["first"], ["none"]):
@@ -63,9 +56,11 @@ def parse_align(words: list) -> tuple:
 def run(args) -> int:
     mode, offset = parse_align(args.align)
     if args.plot:
-        DependencyError.require("matplotlib", "--plot", "pip install matplotlib")
+        check_plot(args.plot)
         check_outputs({"--plot": args.plot}, {"the estimate CSV": args.estimate, "the truth CSV": args.truth})
-    estimate, truth = read_input(args.estimate), read_input(args.truth)
+    warnings_to_stderr()  # a CSV's left-out lines
+    estimate, truth = read_table(args.estimate), read_table(args.truth)
+    check_roles(args, estimate, truth)
     estimate = align(estimate, truth, mode, offset)
     if args.states is None:
         states = [s for s in DISPLAY if s in estimate and s in truth]
@@ -84,6 +79,14 @@ def run(args) -> int:
     if not any(s.samples for s in scores):
         raise TableError(nothing_scored(args, estimate, truth))
     return 0
+
+
+def check_roles(args, estimate: dict, truth: dict) -> None:
+    """A UsageError where the truth CSV has the estimate's ``valid`` column and the estimate has none (the
+    arguments swapped: the truth would be scored against the estimate, every tick valid, no std)."""
+    if "valid" in truth and "valid" not in estimate:
+        raise UsageError(f"{args.truth} has the 'valid' column of an estimate and {args.estimate} has none: the "
+                         "arguments look swapped; give the estimate first: canest evaluate ESTIMATE TRUTH")
 
 
 def nothing_scored(args, estimate, truth) -> str:
