@@ -247,6 +247,30 @@ def test_a_damaged_csv_is_one_line_naming_file_and_line_a_torn_row_a_warning(dri
     assert not (tmp_path / "p.txt").exists()
 
 
+@pytest.mark.parametrize("arguments, says", [
+    (("simulate", "--duration", "1e-9"), "--duration: seconds from 0.1, got 1e-09"),  # was ZeroDivisionError
+    (("simulate", "--mu-jump", "nan:0.3"), "--mu-jump: expected T:MU with T from 0 to the drive's"),  # ValueError
+    (("simulate", "--mu-jump", "20:0.3", "--duration", "5"), "from 0 to the drive's 5 s"),  # never jumped
+    (("simulate", "--mu-jump", "1:9"), "--mu-jump: expected one or four values"),  # said --mu
+    (("simulate", "--noise-scale", "nan"), "--noise-scale: a scale from 0 to 10"),  # ValueError in cantools
+    (("simulate", "-m", "sine", "--amplitude", "nan"), "--amplitude: sine takes steering wheel deg"),
+    (("simulate", "--amplitude", "30"), "--amplitude: dlc follows its own path"),  # silently unused
+    (("simulate", "--seed", "-1"), "--seed: an integer from 0"),  # numpy ValueError
+    (("simulate", "--start-time", "nan"), "--start-time: seconds from 0"),  # wrote nan timestamps
+    (("demo", "--playback-speed", "0"), "--playback-speed: a factor above 0"),  # KeyError after the run
+    (("demo", "--speed", "nan"), "--speed: a target speed from 2 to 300 km/h"),
+    (("monitor", "-i", "virtual", "-c", "m", "--refresh", "0"), "--refresh: seconds from 0.05"),  # busy loop
+    (("monitor", "-i", "virtual", "-c", "m", "--duration", "nan"), "--duration: seconds above 0"),  # no output
+    (("batch", "x.log", "--out", "results", "--workers", "-1"), "--workers: worker processes"),  # hung
+    (("batch", "x.log", "--out", "results", "--connect-timeout", "nan"), "--connect-timeout: seconds above 0"),
+])
+def test_numbers_a_command_cannot_take_are_one_line_before_any_work(tmp_path, arguments, says):
+    outputs = ("-o", tmp_path / "d.log", "--truth", tmp_path / "t.csv") if arguments[0] == "simulate" else ()
+    arguments = [tmp_path / word if word in ("x.log", "results") else word for word in arguments]
+    one_line_error(canest(*arguments, *outputs), 2, says)
+    assert list(tmp_path.iterdir()) == []
+
+
 @pytest.mark.parametrize("speed", ["0", "-20", "nan"])
 def test_simulate_at_a_speed_the_plant_cannot_drive_is_a_usage_error(tmp_path, speed):
     result = canest("simulate", "--speed", speed, "--out", tmp_path / "d.log", "--truth", tmp_path / "t.csv")

@@ -37,10 +37,12 @@ def test_friction_jump_changes_the_road_at_its_time(config):
 
 def test_friction_jump_option_is_checked():
     with pytest.raises(ValueError, match="--mu-jump: expected T:MU"):
-        parse_mu_jump("six:0.3")
-    with pytest.raises(ValueError, match="--mu: expected one or four values"):
-        parse_mu_jump("6:2.5")
-    assert parse_mu_jump("6:0.35") == (6.0, 0.35)
+        parse_mu_jump("six:0.3", 13.0)
+    with pytest.raises(ValueError, match="--mu-jump: expected one or four values"):
+        parse_mu_jump("6:2.5", 13.0)
+    with pytest.raises(ValueError, match="T from 0 to the drive's 5 s"):
+        parse_mu_jump("6:0.35", 5.0)
+    assert parse_mu_jump("6:0.35", 13.0) == (6.0, 0.35)
 
 
 def test_a_drawn_car_is_as_wrong_as_its_config_admits(config):

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import json
+import math
 import signal
 import sys
 import time
@@ -13,7 +14,7 @@ from canest.apps.batch_plan import FLEET_SUMMARY
 from canest.apps.fleet_report import fleet_json, fleet_table, plot_errors, totals
 from canest.commands.common import FORMATTER, add_config, add_log_reading, check_plot, config_from_args, log_reading
 from canest.apps.compare import runnable
-from canest.errors import DependencyError
+from canest.errors import DependencyError, UsageError
 
 EPILOG = """examples:
   canest batch 'logs/**/*.log' --config configs/dici_ev.yaml --out results/
@@ -79,10 +80,22 @@ def stop_on_signals(stop: Stop):
             signal.signal(signum, action)
 
 
+def check_cluster_options(args) -> None:
+    """--workers, --retries and --connect-timeout, before anything runs (a negative worker count hung the local
+    cluster; a nan timeout read as a connection failure)."""
+    if args.workers is not None and args.workers < 1:
+        raise UsageError(f"--workers: worker processes of the local cluster, at least 1, got {args.workers}")
+    if args.retries < 0:
+        raise UsageError(f"--retries: retries of a failed task, 0 or more, got {args.retries}")
+    if not 0.0 < args.connect_timeout < math.inf:
+        raise UsageError(f"--connect-timeout: seconds above 0, got {args.connect_timeout}")
+
+
 def run(args) -> int:
     DependencyError.require("dask.distributed", "canest batch", "pip install 'canest[fleet]'")
     if args.plot:  # before the batch, not after it
         check_plot(args.plot)
+    check_cluster_options(args)
     config = config_from_args(args)
     filters = runnable(config, args.filters) if args.filters else [config.estimator.filter]
     say = print if not args.json else lambda *line: print(*line, file=sys.stderr)

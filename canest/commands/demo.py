@@ -5,10 +5,13 @@ import sys
 from contextlib import ExitStack
 
 from canest.commands.common import FORMATTER, add_config, config_from_args
-from canest.commands.simulate import parse_mu
+from canest.commands.simulate import check_speed_and_seed, parse_mu
+from canest.errors import UsageError
 from canest.apps.demo import run_demo
 from canest.io.sinks import CsvSink
 from canest.sim.maneuvers import MANEUVERS
+
+MAX_PLAYBACK = 10.0  # times real time: the service and the monitor keep up on a busy machine
 
 EPILOG = """A simulated vehicle drives the maneuver; its frames go onto a python-can
 virtual bus in real time; the estimation service decodes them, runs the filter
@@ -28,12 +31,19 @@ def register(subparsers) -> None:
     p.add_argument("--speed", type=float, default=80.0, help="km/h (default 80)")
     p.add_argument("--mu", default="0.85", help="road friction (default 0.85)")
     p.add_argument("--seed", type=int, default=0, help="random seed of the sensor errors (default 0)")
-    p.add_argument("--playback-speed", type=float, default=1.0, help="1 = real time (default), 2 = twice as fast")
+    p.add_argument("--playback-speed", type=float, default=1.0,
+                   help=f"1 = real time (default), 2 = twice as fast, up to {MAX_PLAYBACK:g}; the service reads each "
+                        "frame's arrival time, so at another speed it estimates a car whose motion is squeezed (or "
+                        "stretched) in time: the accuracy table means what it says at 1 only")
     p.add_argument("--csv", help="also write the estimates to this CSV")
     p.set_defaults(func=run)
 
 
 def run(args) -> int:
+    check_speed_and_seed(args.speed, args.seed)
+    if not 0.0 < args.playback_speed <= MAX_PLAYBACK:  # also refuses nan
+        raise UsageError(f"--playback-speed: a factor above 0 and up to {MAX_PLAYBACK:g} (1: real time), got "
+                         f"{args.playback_speed}")
     config = config_from_args(args)
     with ExitStack() as stack:
         sinks = [stack.enter_context(CsvSink(args.csv))] if args.csv else []

@@ -1,10 +1,14 @@
 """canest monitor: a live view of the estimates a running daemon sends."""
 from __future__ import annotations
 
+import math
 import sys
 
 from canest.commands.common import FORMATTER, add_bus_overrides, add_config, config_from_args
-from canest.errors import BusOpenError
+from canest.errors import BusOpenError, UsageError
+
+MIN_REFRESH = 0.05  # s: a terminal redraws no faster than a person reads
+MAX_REFRESH = 60.0
 
 EPILOG = """examples:
   canest monitor -c vcan1
@@ -36,8 +40,9 @@ def register(subparsers) -> None:
                               description=__doc__, epilog=EPILOG, formatter_class=FORMATTER)
     add_config(p, short_option=False)
     add_bus_overrides(p, "watched bus (default: the config's output bus)", output=False)
-    p.add_argument("--refresh", type=float, default=0.5, help="seconds between redraws (default 0.5)")
-    p.add_argument("--duration", type=float, help="stop after this many seconds (default: until Ctrl-C)")
+    p.add_argument("--refresh", type=float, default=0.5,
+                   help=f"seconds between redraws, {MIN_REFRESH:g} to {MAX_REFRESH:g} (default 0.5)")
+    p.add_argument("--duration", type=float, help="stop after this many seconds, above 0 (default: until Ctrl-C)")
     p.add_argument("--once", action="store_true", help="print one view once the estimates have arrived, then exit")
     p.add_argument("--lines", action="store_true", help="one line per refresh even on a terminal")
     p.set_defaults(func=run)
@@ -48,6 +53,10 @@ def run(args) -> int:
     from canest.codec.dbc import load_database
     from canest.io.bus import open_bus
 
+    if not MIN_REFRESH <= args.refresh <= MAX_REFRESH:  # also refuses nan
+        raise UsageError(f"--refresh: seconds from {MIN_REFRESH:g} to {MAX_REFRESH:g}, got {args.refresh}")
+    if args.duration is not None and not 0.0 < args.duration < math.inf:
+        raise UsageError(f"--duration: seconds above 0, got {args.duration}")
     config = config_from_args(args)
     bus_config = config.output_bus
     database = load_database(config.output_dbc, "monitor")

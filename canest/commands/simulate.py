@@ -13,7 +13,7 @@ from canest.errors import UsageError
 from canest.commands.common import FORMATTER, add_config, config_from_args
 from canest.io.outputs import OutputFile, check_outputs, is_stdio
 from canest.io.sinks import open_frame_writer
-from canest.sim.maneuvers import MANEUVERS
+from canest.sim.maneuvers import MANEUVERS, make_maneuver
 from canest.sim.mismatch import PlantMismatch, grade_angle
 from canest.sim.simulate import simulate
 
@@ -45,6 +45,11 @@ MIN_SPEED_KMH = 2.0  # the car starts at the target speed; the plant is valid fr
 MAX_SPEED_KMH = 300.0
 MAX_VIBRATION = 10.0  # times a real car's IMU vibration (canest.sim.sensors); at 10 ay's alone is 14 m/s^2, beyond any car
 MAX_CROSSWIND = 5.0  # times a gusty day's side wind (canest.sim.wind): gusts of 10 m/s in RMS, a storm's
+MAX_NOISE_SCALE = 10.0  # times the simulated sensors' noise and biases
+MIN_DURATION = 0.1  # s: ten of the fastest message's cycles
+# maneuver -> (what its --amplitude is, lowest, highest): a steering wheel's lock, a car's traction
+AMPLITUDES = {"sine": ("steering wheel deg", -720.0, 720.0), "step": ("steering wheel deg", -720.0, 720.0),
+              "launch": ("a peak acceleration in m/s^2", 0.0, 15.0)}
 
 
 def check_scale(option: str, value: float, maximum: float, one: str) -> None:
@@ -67,11 +72,14 @@ def register(subparsers) -> None:
     p.add_argument("--mu", default="0.85", help="road friction, one value or four (fl,fr,rl,rr) (default 0.85)")
     p.add_argument("--mu-jump", metavar="T:MU",
                    help="the friction changes to MU (one value or four) at T s, e.g. 6:0.35 (default: no change)")
-    p.add_argument("--duration", type=float, help="seconds to simulate (default: per maneuver)")
+    p.add_argument("--duration", type=float,
+                   help=f"seconds to simulate, from {MIN_DURATION:g} (default: per maneuver)")
     p.add_argument("--amplitude", type=float,
-                   help="steering wheel amplitude in deg for sine/step (default 60/45); peak acceleration demand "
-                        "in m/s^2 for launch (default 6)")
-    p.add_argument("--noise-scale", type=float, default=1.0, help="multiply every sensor noise and bias (default 1)")
+                   help="steering wheel amplitude in deg for sine/step (default 60/45, -720 to 720); peak "
+                        "acceleration demand in m/s^2 for launch (default 6, 0 to 15); the others follow their own "
+                        "path")
+    p.add_argument("--noise-scale", type=float, default=1.0,
+                   help=f"multiply every sensor noise and bias, 0 to {MAX_NOISE_SCALE:g} (default 1)")
     p.add_argument("--outliers", type=float, default=0.0,
                    help="probability per sample of a heavy-tailed (Student-t) outlier (default 0)")
     p.add_argument("--vibration", type=float, default=0.0, metavar="SCALE",
@@ -114,18 +122,18 @@ def register(subparsers) -> None:
     p.set_defaults(func=run)
 
 
-def parse_mu(text: str):
+def parse_mu(text: str, option: str = "--mu"):
     try:
         values = [float(v) for v in text.split(",")]
     except ValueError:
-        raise UsageError(f"--mu: expected a number or four comma-separated numbers, got '{text}'") from None
+        raise UsageError(f"{option}: expected a number or four comma-separated numbers, got '{text}'") from None
     if len(values) not in (1, 4) or not all(0.05 <= v <= 1.5 for v in values):
-        raise UsageError(f"--mu: expected one or four values in [0.05, 1.5], got '{text}'")
+        raise UsageError(f"{option}: expected one or four values in [0.05, 1.5], got '{text}'")
     return values[0] if len(values) == 1 else values
 
 
-def parse_mu_jump(text):
-    """``T:MU`` -> (T, mu); None stays None."""
+def parse_mu_jump(text, drive_seconds: float):
+    """``T:MU`` -> (T, mu), T within the drive's ``drive_seconds``; None stays None."""
     if text is None:
         return None
     when, _, mu = text.partition(":")
@@ -133,9 +141,10 @@ def parse_mu_jump(text):
         jump_time = float(when)
     except ValueError:
         raise UsageError(f"--mu-jump: expected T:MU with T in seconds, e.g. 6:0.35, got '{text}'") from None
-    if not mu or jump_time < 0:
-        raise UsageError(f"--mu-jump: expected T:MU with T >= 0 s, e.g. 6:0.35, got '{text}'")
-    return jump_time, parse_mu(mu)
+    if not mu or not 0.0 <= jump_time < drive_seconds:  # also refuses nan
+        raise UsageError(f"--mu-jump: expected T:MU with T from 0 to the drive's {drive_seconds:g} s, e.g. 6:0.35, "
+                         f"got '{text}'")
+    return jump_time, parse_mu(mu, "--mu-jump")
 
 
 SCALE_RANGE = (0.3, 3.0)  # a car's stiffness, ratio or radius off by more is another car
@@ -180,19 +189,42 @@ def parse_mismatch(args) -> PlantMismatch:
                          args.roll_gradient, args.pitch_gradient, grade_angle(args.grade), radians(args.gyro_bias_2))
 
 
-def run(args) -> int:
-    config = config_from_args(args)
-    mu = parse_mu(args.mu)
-    mismatch = parse_mismatch(args)
-    mu_jump = parse_mu_jump(args.mu_jump)
+def check_speed_and_seed(speed: float, seed: int) -> None:
+    """``--speed`` (km/h) within what the plant drives, ``--seed`` one numpy takes (simulate, demo)."""
+    if not MIN_SPEED_KMH <= speed <= MAX_SPEED_KMH:  # also refuses nan
+        raise UsageError(f"--speed: a target speed from {MIN_SPEED_KMH:g} to {MAX_SPEED_KMH:g} km/h, got {speed}")
+    if not 0 <= seed < 2**32:
+        raise UsageError(f"--seed: an integer from 0 to {2**32 - 1}, got {seed}")
+
+
+def check_drive_options(args) -> None:
+    """The drive's numbers, each within what the plant and the encoder take (nan refused everywhere)."""
     if not 0.0 <= args.outliers < 1.0:
         raise UsageError(f"--outliers: a probability per sample in [0, 1), got {args.outliers}")
     check_scale("--vibration", args.vibration, MAX_VIBRATION, "a real car's")
     check_scale("--crosswind", args.crosswind, MAX_CROSSWIND, "a gusty day's")
-    if not MIN_SPEED_KMH <= args.speed <= MAX_SPEED_KMH:  # also refuses nan
-        raise UsageError(f"--speed: a target speed from {MIN_SPEED_KMH:g} to {MAX_SPEED_KMH:g} km/h, got {args.speed}")
-    if args.duration is not None and not (math.isfinite(args.duration) and args.duration > 0):
-        raise UsageError(f"--duration: seconds above 0, got {args.duration}")
+    check_scale("--noise-scale", args.noise_scale, MAX_NOISE_SCALE, "series-production sensors'")
+    check_speed_and_seed(args.speed, args.seed)
+    if args.duration is not None and not MIN_DURATION <= args.duration < math.inf:
+        raise UsageError(f"--duration: seconds from {MIN_DURATION:g}, got {args.duration}")
+    if not 0.0 <= args.start_time < math.inf:
+        raise UsageError(f"--start-time: seconds from 0 (a log's clock; e.g. 1712345678.0), got {args.start_time}")
+    if args.amplitude is not None:
+        if args.maneuver not in AMPLITUDES:
+            raise UsageError(f"--amplitude: {args.maneuver} follows its own path; only {', '.join(AMPLITUDES)} "
+                             "take an amplitude")
+        unit, low, high = AMPLITUDES[args.maneuver]
+        if not low <= args.amplitude <= high:
+            raise UsageError(f"--amplitude: {args.maneuver} takes {unit} from {low:g} to {high:g}, got {args.amplitude}")
+
+
+def run(args) -> int:
+    config = config_from_args(args)
+    mu = parse_mu(args.mu)
+    mismatch = parse_mismatch(args)
+    check_drive_options(args)
+    plan = make_maneuver(args.maneuver, args.speed / 3.6, args.amplitude, args.duration, args.seed)
+    mu_jump = parse_mu_jump(args.mu_jump, plan.duration)
     if is_stdio(args.truth):
         raise UsageError("--truth -: the truth CSV goes to a file; only --out may be - (standard output)")
     check_outputs({"--out": args.out, "--truth": args.truth},
