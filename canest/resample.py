@@ -48,6 +48,10 @@ class Resampler:
         self.fresh[i] = True
         self.saturated[i] = saturated
 
+    def never_held(self) -> list:
+        """The inputs no value was ever held for."""
+        return [name for name, stamp in zip(self.names, self.stamps) if stamp == -math.inf]
+
     def sample(self, t: float) -> Sample:
         ages = t - self.stamps
         stale = ages > self.timeouts

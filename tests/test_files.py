@@ -179,6 +179,22 @@ def test_bad_lines_warn_on_stderr_and_the_summary_counts_them(drive, tmp_path):
         f"writing it) (line {drive[1]}); first: {lines[-1].strip()[:-9]!r}"]
 
 
+def test_a_log_without_a_mapped_message_warns_naming_it_and_its_inputs(drive, tmp_path):
+    """The IMU's frames left out of the log: every other frame decodes and the summary's counts look healthy, yet no
+    tick estimates a yaw rate; one warning says which message and inputs never arrived (before, nothing did)."""
+    imu = [line for line in drive[0].read_text().splitlines(keepends=True) if " vcan0 130#" in line]
+    assert imu, "the simulated log holds ESC_IMU (0x130) frames"
+    (tmp_path / "no_imu.log").write_text("".join(line for line in drive[0].read_text().splitlines(keepends=True)
+                                                 if line not in imu))
+    result = canest("replay", tmp_path / "no_imu.log", "--csv", tmp_path / "est.csv", "-q")
+    assert result.returncode == 0
+    assert result.stderr.strip() == (
+        f"canest: warning: {tmp_path / 'no_imu.log'}: no value of 3 mapped input(s) in the whole log (ESC_IMU: ax, "
+        "ay, yaw_rate); the states that need them are not estimated: compare the log's IDs with the config's input "
+        "DBC (canest check --config ...) or leave the inputs the car does not send unmapped")
+    assert canest("replay", drive[0], "--csv", tmp_path / "whole.csv", "-q").stderr == ""
+
+
 def test_an_empty_log_gives_a_csv_header_a_warning_and_exit_0(tmp_path):
     (tmp_path / "empty.log").write_text("")
     result = canest("replay", tmp_path / "empty.log", "--csv", tmp_path / "est.csv", "-q")

@@ -77,7 +77,24 @@ def replay(config: Config, log_path, out_log=None, out_csv=None, progress: bool 
         pipeline.close()  # the online calibration saved
     for warning in source.warnings():
         LOG.warning(warning)
-    return {"frames": 0, **pipeline.summary(), **source.summary(), **({"stopped": 1} if stopped else {})}
+    summary = {"frames": 0, **pipeline.summary(), **source.summary(), **({"stopped": 1} if stopped else {})}
+    if summary.get("decoded"):  # none decoded: the replay command's error says why
+        never_arrived(config, log_path, pipeline.resampler.never_held())
+    return summary
+
+
+def never_arrived(config: Config, log_path, names: list) -> None:
+    """One warning naming the mapped inputs of which the log held no value, by message: the states that need them
+    were never estimated (or only from the others), which a summary of counts does not show."""
+    if not names:
+        return
+    by_message = {}
+    for name in names:
+        by_message.setdefault(config.signals[name].message, []).append(name)
+    listed = "; ".join(f"{message}: {', '.join(inputs)}" for message, inputs in by_message.items())
+    LOG.warning(f"{log_path}: no value of {len(names)} mapped input(s) in the whole log ({listed}); the states "
+                "that need them are not estimated: compare the log's IDs with the config's input DBC (canest check "
+                "--config ...) or leave the inputs the car does not send unmapped")
 
 
 def play(log_path, bus: can.BusABC, speed: float = 1.0, progress: bool = True, log_format=None,
