@@ -53,6 +53,44 @@ def test_unknown_signal_names_file_line_key_and_message(tmp_path):
     assert re.match(rf"{re.escape(str(path))}:\d+: input\.signals\.ay\.signal: no signal 'LatAcc' in message 'ESC_IMU'", message)
 
 
+def test_two_inputs_from_one_signal_are_refused_but_four_wheel_speeds_may_share_one(tmp_path):
+    """ax and ay both read from the lateral accelerometer passed ``check`` and ran as if the car drove sideways."""
+    path = write_variant(tmp_path, lambda d: d["input"]["signals"].update(ax={"signal": "ESC_IMU.LatAccel",
+                                                                            "unit": "m/s^2"}))
+    assert re.search(r"input\.signals\.ay\.signal: ESC_IMU\.LatAccel is ax's already: two inputs read from one "
+                     r"signal", error_of(path)), error_of(path)
+    def one_speed_for_all(data):
+        data["input"]["signals"].update({f"wheel_speed_{w}": data["input"]["signals"]["wheel_speed_fl"]
+                                         for w in ("fr", "rl", "rr")})
+        data["input"]["messages"].pop("ESC_WheelSpeedsRear")  # its checks would never run
+    one_speed = write_variant(tmp_path, one_speed_for_all)
+    signals = load_config(one_speed).signals
+    assert {signals[f"wheel_speed_{w}"].signal for w in ("fl", "fr", "rl", "rr")} == {signals["wheel_speed_fl"].signal}
+
+
+def test_an_output_id_the_car_sends_on_the_same_bus_is_refused_by_the_config_and_by_run(tmp_path):
+    """Two senders of one ID on one bus garble each other's frames: the output DBC's CE_Velocity renumbered to the
+    IMU's 0x130 (304) is refused where the config puts both on vcan0, and where run's options do."""
+    clash = (ROOT / "dbc" / "canest_estimates.dbc").read_text().replace("BO_ 1280 CE_Velocity", "BO_ 304 CE_Velocity")
+    assert clash != (ROOT / "dbc" / "canest_estimates.dbc").read_text()
+    (tmp_path / "dbc").mkdir()
+    (tmp_path / "dbc" / "clash.dbc").write_text(clash)
+
+    def edit(data, channel):
+        data["output"]["dbc"] = "../dbc/clash.dbc"
+        data["output"]["bus"] = {"interface": "virtual", "channel": channel}
+        data["input"]["bus"] = {"interface": "virtual", "channel": "car"}
+    same = write_variant(tmp_path, lambda d: edit(d, "car"))
+    assert re.search(r"car\.yaml:\d+: output\.bus: output message CE_Velocity has ID 0x130, which the input DBC's "
+                     r"ESC_IMU has too, on the same bus", error_of(same)), error_of(same)
+    apart = write_variant(tmp_path, lambda d: edit(d, "estimates"))
+    assert load_config(apart).output_bus.channel == "estimates"
+    result = subprocess.run([sys.executable, "-m", "canest", "run", "--config", str(apart), "--output-channel", "car"],
+                            capture_output=True, text=True, timeout=120, cwd=ROOT)
+    assert result.returncode == 2 and result.stderr.startswith("canest: error: virtual:car: output message "
+                                                               "CE_Velocity has ID 0x130"), result.stderr
+
+
 def test_unknown_message(tmp_path):
     path = write_variant(tmp_path, lambda d: d["input"]["signals"].update(ax="NOPE.LongAccel"))
     assert "input.signals.ax.signal: no message 'NOPE'" in error_of(path)

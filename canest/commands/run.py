@@ -7,7 +7,10 @@ from contextlib import ExitStack
 from canest.apps import journal
 from canest.commands.common import (FORMATTER, add_bus_overrides, add_config, add_state_file, config_from_args,
                                     state_file_output)
+from canest.codec.dbc import load_database
 from canest.config import DEFAULT_CONFIG
+from canest.config.buses import id_clash, same_bus
+from canest.errors import UsageError
 from canest.io.outputs import check_outputs
 from canest.io.sinks import CsvSink
 from canest.pipeline import format_summary
@@ -46,8 +49,18 @@ def register(subparsers) -> None:
     p.set_defaults(func=run)
 
 
+def check_bus_ids(config) -> None:
+    """A UsageError where the command line put the output on the input's bus and an output ID is one the car sends
+    (the config's own buses are checked when it loads: :func:`canest.config.buses.id_clash`)."""
+    if same_bus(config.input_bus, config.output_bus):
+        clash = id_clash(load_database(config.input_dbc, "input"), load_database(config.output_dbc, "output"))
+        if clash:
+            raise UsageError(f"{config.input_bus.interface}:{config.input_bus.channel}: {clash}")
+
+
 def run(args) -> int:
     config = config_from_args(args)
+    check_bus_ids(config)
     check_outputs({"--csv": args.csv, **state_file_output(config, args)},
                   {"the config": args.config or DEFAULT_CONFIG, "the input DBC": config.input_dbc,
                    "the output DBC": config.output_dbc})

@@ -18,7 +18,7 @@ from pathlib import Path
 
 from canest.codec.dbc import load_database, tolerated_problems
 from canest.codec.opendbc_dbcs import PREFIX as OPENDBC_PREFIX, closest_names, opendbc_path
-from canest.config.buses import read_bus
+from canest.config.buses import id_clash, read_bus, same_bus
 from canest.config.estimator import check_model_inputs, read_estimator
 from canest.config.signal_map import read_message_checks, read_signal_specs
 from canest.config.vehicle import read_vehicle
@@ -78,7 +78,7 @@ def load_config(path) -> Config:
     input_dbc = _dbc_path(doc, ("input", "dbc"))
     output_dbc = _dbc_path(doc, ("output", "dbc"))
     input_db = load_database(input_dbc, f"{path}: input.dbc")
-    load_database(output_dbc, f"{path}: output.dbc")
+    output_db = load_database(output_dbc, f"{path}: output.dbc")
     specs = read_signal_specs(doc, input_db, input_dbc, vehicle)
     estimator = read_estimator(doc)
     check_model_inputs(doc, estimator, specs)
@@ -86,13 +86,17 @@ def load_config(path) -> Config:
     for message, problem in tolerated.items():
         LOG.warning("%s: input.dbc %s: %s (tolerated: %s)", path, input_dbc, problem,
                     f"no signal is taken from {message}" if message else "loaded without cantools' strict checks")
+    input_bus, output_bus = read_bus(doc, ("input", "bus"), "vcan0"), read_bus(doc, ("output", "bus"), "vcan1")
+    clash = id_clash(input_db, output_db) if same_bus(input_bus, output_bus) else None
+    if clash:
+        raise doc.error(("output", "bus"), clash)
     return Config(
         path=path.resolve(),
         vehicle=vehicle,
         input_dbc=input_dbc,
         output_dbc=output_dbc,
-        input_bus=read_bus(doc, ("input", "bus"), "vcan0"),
-        output_bus=read_bus(doc, ("output", "bus"), "vcan1"),
+        input_bus=input_bus,
+        output_bus=output_bus,
         signals=specs,
         messages=read_message_checks(doc, input_db, input_dbc, specs),
         estimator=estimator,

@@ -53,3 +53,21 @@ def read_bus(doc: Document, key_path: tuple, default_channel: str) -> BusConfig:
     if isinstance(channel, bool) or not isinstance(channel, (str, int)):
         raise doc.error(key_path + ("channel",), f"must be a channel name or number, got {channel!r}")
     return BusConfig(interface, str(channel), _bus_options(doc, key_path + ("options",), interface))
+
+
+def same_bus(first: BusConfig, second: BusConfig) -> bool:
+    """Whether two bus settings name one bus (interface and channel)."""
+    return (first.interface, first.channel) == (second.interface, second.channel)
+
+
+def id_clash(input_db, output_db) -> str | None:
+    """Where the output DBC sends an ID the input DBC's car sends too (on one bus: two senders of one ID, each
+    garbling the other's frames, and canest decoding its own), the first such pair as a sentence; None if none."""
+    car = {(m.frame_id, m.is_extended_frame): m.name for m in input_db.messages}
+    for message in output_db.messages:
+        name = car.get((message.frame_id, message.is_extended_frame))
+        if name is not None:
+            return (f"output message {message.name} has ID 0x{message.frame_id:X}, which the input DBC's {name} "
+                    "has too, on the same bus: put the output on a bus of its own or give the output DBC's "
+                    "messages IDs the car does not send")
+    return None

@@ -164,7 +164,7 @@ def _valid_when(doc: Document, where: tuple, message, dbc_path: Path, given) -> 
 def read_signal_specs(doc: Document, database, dbc_path: Path, vehicle: VehicleParams) -> dict:
     key_path = ("input", "signals")
     section = doc.section(key_path)
-    specs = {}
+    specs, taken = {}, {}  # (message, signal, multiplexer value) -> the input first mapped to it
     for canonical, entry in section.items():
         where = key_path + (canonical,)
         if canonical not in sig.CANONICAL:
@@ -191,6 +191,11 @@ def read_signal_specs(doc: Document, database, dbc_path: Path, vehicle: VehicleP
                                                f"zero is learned while driving straight), got {zero!r}")
         valid = _valid_when(doc, where + ("valid",), message, dbc_path, entry["valid"]) if "valid" in entry else None
         mux = int(signal.multiplexer_ids[0]) if signal.multiplexer_ids else None
+        first = taken.setdefault((message.name, signal.name, mux), canonical)
+        if first != canonical and not {first, canonical} <= set(sig.INPUT_GROUPS["wheel_speeds"]):
+            raise doc.error(where + ("signal",), f"{name} is {first}'s already: two inputs read from one signal "
+                                                 "(only the four wheel speeds may share one, a car that sends one "
+                                                 "speed for all)")
         specs[canonical] = SignalSpec(canonical, message.name, signal.name, sign * scale * factor, offset, mux,
                                       parts=tuple(s.name for s in signals[1:]),
                                       range=_range(doc, where, entry, signals), range_given="range" in entry,
