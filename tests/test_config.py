@@ -73,18 +73,24 @@ def test_an_output_id_the_car_sends_on_the_same_bus_is_refused_by_the_config_and
     IMU's 0x130 (304) is refused where the config puts both on vcan0, and where run's options do."""
     clash = (ROOT / "dbc" / "canest_estimates.dbc").read_text().replace("BO_ 1280 CE_Velocity", "BO_ 304 CE_Velocity")
     assert clash != (ROOT / "dbc" / "canest_estimates.dbc").read_text()
-    (tmp_path / "dbc").mkdir()
-    (tmp_path / "dbc" / "clash.dbc").write_text(clash)
 
-    def edit(data, channel):
-        data["output"]["dbc"] = "../dbc/clash.dbc"
-        data["output"]["bus"] = {"interface": "virtual", "channel": channel}
-        data["input"]["bus"] = {"interface": "virtual", "channel": "car"}
-    same = write_variant(tmp_path, lambda d: edit(d, "car"))
+    def variant(channel):
+        def edit(data):
+            data["output"]["dbc"] = "../dbc/clash.dbc"
+            data["output"]["bus"] = {"interface": "virtual", "channel": channel}
+            data["input"]["bus"] = {"interface": "virtual", "channel": "car"}
+        (tmp_path / channel).mkdir()
+        path = write_variant(tmp_path / channel, edit)
+        (tmp_path / channel / "dbc" / "clash.dbc").write_text(clash)
+        return path
+    same = variant("car")
     assert re.search(r"car\.yaml:\d+: output\.bus: output message CE_Velocity has ID 0x130, which the input DBC's "
                      r"ESC_IMU has too, on the same bus", error_of(same)), error_of(same)
-    apart = write_variant(tmp_path, lambda d: edit(d, "estimates"))
+    apart = variant("estimates")
     assert load_config(apart).output_bus.channel == "estimates"
+    refused = canest("check", "--config", same, "--json", check=False)  # a script reading stdout learns it too
+    assert refused.returncode == 2 and json.loads(refused.stdout) == {
+        "config": str(same), "ok": False, "error": error_of(same)}, refused.stdout
     result = subprocess.run([sys.executable, "-m", "canest", "run", "--config", str(apart), "--output-channel", "car"],
                             capture_output=True, text=True, timeout=120, cwd=ROOT)
     assert result.returncode == 2 and result.stderr.startswith("canest: error: virtual:car: output message "

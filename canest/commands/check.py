@@ -4,6 +4,8 @@ from __future__ import annotations
 import json
 
 from canest.commands.common import FORMATTER, add_config, config_from_args
+from canest.config import DEFAULT_CONFIG
+from canest.errors import CanestError
 from canest.codec.decode import InputDecoder
 from canest.codec.encode import CALIBRATION_MESSAGE, EstimateEncoder
 from canest.codec.raw_range import raw_range_warnings
@@ -31,7 +33,8 @@ min_speed, online_calibration), signals (canonical, message, signals, frame_id, 
 cycle_time_from, timeout, unit, factor, offset, overrides), integrity,
 tolerated, missing_inputs, range_warnings, raw_range_warnings,
 calibration_sent (the output DBC carries CE_Calibration and the learner is on), calibration_not_sent (the learned
-parameters its CE_Calibration has no page for), ok.
+parameters its CE_Calibration has no page for), ok (true). A config that is not
+usable prints {config, ok: false, error} (the error also on stderr).
 Exit status 0 when the config is usable, 2 when it is not."""
 
 
@@ -153,8 +156,13 @@ def _print(report: dict) -> None:
 
 
 def run(args) -> int:
-    config = config_from_args(args)
-    report = _report(config, InputDecoder(config), EstimateEncoder(config.output_dbc))
+    try:
+        config = config_from_args(args)
+        report = _report(config, InputDecoder(config), EstimateEncoder(config.output_dbc))
+    except CanestError as exc:
+        if args.json:  # a script reading stdout learns it too, not only the one line on stderr
+            print(json.dumps({"config": str(args.config or DEFAULT_CONFIG), "ok": False, "error": str(exc)}))
+        raise
     if args.json:
         print(json.dumps(report))
     else:
