@@ -79,6 +79,17 @@ def test_init_from_the_ford_dbc_finds_its_inputs_and_check_accepts_the_config(tm
         in check.stdout
 
 
+@pytest.mark.parametrize("name", ["ford_pt", "ford_pt.txt"])
+def test_a_dbc_named_without_its_suffix_is_read_as_a_dbc_by_init_and_by_check(tmp_path, name):
+    """init read it, check did not (cantools takes the format from the suffix): the config init wrote was refused."""
+    dbc = tmp_path / name
+    dbc.write_bytes(ford_dbc().read_bytes())
+    out = tmp_path / "fusion.yaml"
+    assert canest("init", "--dbc", dbc, "--out", out).returncode == 0
+    check = canest("check", "--config", out)
+    assert check.returncode == 0 and check.stdout.rstrip().endswith("OK"), check.stderr
+
+
 def test_init_never_replaces_a_file(tmp_path):
     out = tmp_path / "mine.yaml"
     out.write_text("# my own config\n")

@@ -24,6 +24,7 @@ from canest.errors import DbcError
 
 LOG = logging.getLogger("canest.dbc")
 DBC_ENCODING = "cp1252"  # cantools' default for a .dbc file
+CANTOOLS_FORMATS = ("arxml", "dbc", "kcd", "sym", "cdd")  # what cantools reads, by the file's suffix
 
 _CACHE: dict = {}  # resolved path -> ((size, mtime_ns), database, {message name: problem})
 
@@ -47,16 +48,19 @@ def load_database(path, owner: str):
 
 
 def _parse(path: Path, owner: str):
-    """(database, {message name: problem}): strict, else lenient, else (a ``.dbc``) after the text repairs."""
+    """(database, {message name: problem}): strict, else lenient, else (a DBC) after the text repairs. A file whose
+    suffix names no format cantools reads (none, ``.txt``) is read as a DBC, as ``canest init`` reads it."""
     import cantools
 
+    known = path.suffix.lower().removeprefix(".") in CANTOOLS_FORMATS
+    database_format = None if known else "dbc"
     try:
-        return cantools.database.load_file(str(path), strict=True), {}
+        return cantools.database.load_file(str(path), database_format, strict=True), {}
     except Exception as strict_error:  # cantools raises several parser exception types
         try:
-            database = cantools.database.load_file(str(path), strict=False)
+            database = cantools.database.load_file(str(path), database_format, strict=False)
         except Exception as exc:
-            if path.suffix.lower() != ".dbc":
+            if known and path.suffix.lower() != ".dbc":
                 raise DbcError(f"{path}: cannot load DBC (referenced by {owner}): {exc}") from None
             database, repairs = parse_dbc_text(path.read_text(encoding=DBC_ENCODING), str(path),
                                                f" (referenced by {owner})")
