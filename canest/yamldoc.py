@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import difflib
 import math
+import re
 from pathlib import Path
 
 import yaml
@@ -23,6 +24,16 @@ MAX_NODES = 10_000  # values after alias expansion; a full config has a few hund
 MAX_DEPTH = 32  # nesting of mappings and lists; a config needs five
 PLAIN_COLLECTIONS = ("tag:yaml.org,2002:map", "tag:yaml.org,2002:seq")
 MERGE_TAG = "tag:yaml.org,2002:merge"
+
+
+class ConfigLoader(yaml.SafeLoader):
+    """PyYAML's safe loader reading YAML 1.2's exponent floats too (``1.05e5``, ``2e-3``): YAML 1.1, which PyYAML
+    follows, wants a dot and a signed exponent (``1.05e+5``), and read the others as text ("must be a number")."""
+
+
+ConfigLoader.add_implicit_resolver("tag:yaml.org,2002:float",
+                                   re.compile(r"^[-+]?[0-9][0-9_]*(?:\.[0-9_]*)?[eE][-+]?[0-9]+$"),
+                                   list("-+0123456789"))
 
 
 def suggestion(word: str, choices, listing: str = "available", hint: str = "") -> str:
@@ -52,13 +63,16 @@ class Document:
         self.path = path
         raw = _read(path)
         try:
-            node = yaml.compose(raw, Loader=yaml.SafeLoader)
+            node = yaml.compose(raw, Loader=ConfigLoader)
         except yaml.MarkedYAMLError as exc:
             mark = exc.problem_mark or exc.context_mark
             where = f", line {mark.line + 1}" if mark else ""
             raise ConfigError(f"{path}: invalid YAML{where}: {', '.join(filter(None, (exc.context, exc.problem)))}") from None
         except yaml.reader.ReaderError as exc:  # bytes that are not text
-            raise ConfigError(f"{path}: invalid YAML: {exc.reason} at position {exc.position}") from None
+            line = raw[:exc.position].count(b"\n") + 1
+            remedy = "" if exc.encoding == "unicode" else f" ({exc.encoding}): save the file as UTF-8"
+            raise ConfigError(f"{path}:{line}: invalid YAML: {exc.reason} at position {exc.position}{remedy}") \
+                from None
         except RecursionError:
             raise ConfigError(f"{path}: YAML nested too deeply (more than {MAX_DEPTH} levels)") from None
         self.lines: dict = {}

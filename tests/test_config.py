@@ -392,14 +392,26 @@ def test_yaml_alias_bomb_is_refused_at_once(tmp_path):
     ("? [a, b]\n: 1\n", ":1: top level: a key must be a name"),
     ("\"vehicle\\n\": 1\n", ":1: vehicle\\n: unknown key; did you mean 'vehicle'?"),
     ("vehicle:\n  mass: 1" + "0" * 5000 + "\n", ":2: vehicle.mass: Exceeds the limit (4300 digits) for integer string"),
-    ("vehicle: \x07\n", ": invalid YAML: special characters are not allowed at position 9"),
+    ("vehicle: \x07\n", ":1: invalid YAML: special characters are not allowed at position 9"),
+    ("vehicle:\n  name: Citro\xebn\n", ":2: invalid YAML: invalid continuation byte at position 22 (utf-8): save the "
+                                      "file as UTF-8"),  # a Latin-1 file
     ("a: 1\n---\nb: 2\n", ": invalid YAML, line 2: expected a single document in the stream, but found another"),
 ])
 def test_yaml_that_no_config_needs_is_one_error_line(tmp_path, text, expected):
     path = tmp_path / "car.yaml"
-    path.write_text(text)
+    path.write_bytes(text.encode("latin-1"))  # UTF-8 for every text but the one that is not
     message = error_of(path)
     assert message.startswith(f"{path}{expected}") and "\n" not in message, message
+
+
+def test_an_exponent_float_as_yaml_1_2_writes_it_is_a_number(tmp_path):
+    """``1.05e5`` was text to PyYAML (YAML 1.1 wants ``1.05e+5``): "must be a number, got '1.05e5'"."""
+    for written in ("1.05e5", "105e3", "1.05E+5", "1.05e+5"):
+        path = write_variant(tmp_path, lambda d: d["vehicle"].update(cornering_stiffness_front="@"))
+        path.write_text(path.read_text().replace("'@'", written))
+        assert load_config(path).vehicle.cornering_stiffness_front == 105000.0, written
+    path.write_text(path.read_text().replace("1.05e+5", "'1.05e5'"))  # quoted: text, as meant
+    assert "vehicle.cornering_stiffness_front: must be a number, got '1.05e5'" in error_of(path)
 
 
 def test_a_config_larger_than_the_limit_is_refused_unread(tmp_path):
