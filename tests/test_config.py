@@ -195,10 +195,18 @@ def test_every_filter_is_selectable_by_config(tmp_path):
 
 
 def test_wrong_filter_option_names_the_key(tmp_path):
-    path = write_variant(tmp_path, lambda d: d["estimator"].update(filter="lmrwekf", filter_options={"windw": 3}))
-    assert re.search(r":\d+: estimator\.filter_options: lmrwekf: .*windw", error_of(path))
-    path = write_variant(tmp_path, lambda d: d["estimator"].update(filter="lmrwekf", filter_options={"forgetting": 0.5}))
-    assert "forgetting must be in [0.95, 0.995]" in error_of(path)
+    """An unknown option names the filter's own (it showed Python's "RuleFilter.__init__() got an unexpected keyword
+    argument"), an option the catalog sets is not one, and a width or window must be positive (-3 passed)."""
+    def options(filter_name, **given):
+        return error_of(write_variant(tmp_path, lambda d: d["estimator"].update(filter=filter_name,
+                                                                                filter_options=given)))
+    assert re.search(r":\d+: estimator\.filter_options\.windw: lmrwekf has no option 'windw'; did you mean "
+                     r"'window'\?", options("lmrwekf", windw=3))
+    assert "estimator.filter_options.window: ckf has no option 'window'; it takes none" in options("ckf", window=3)
+    assert "has no option 'x0'" in options("lmrwekf", x0=3)
+    assert "estimator.filter_options.kernel_width: must be a number above 0 (default 3), got -3" in options(
+        "mcsckf", kernel_width=-3)
+    assert "forgetting must be in [0.95, 0.995]" in options("lmrwekf", forgetting=0.5)
 
 
 def test_models_and_filters_must_fit(tmp_path):

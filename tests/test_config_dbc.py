@@ -38,6 +38,19 @@ def line_of(path, text: str) -> int:
     return next(n for n, line in enumerate(path.read_text().splitlines(), 1) if text in line)
 
 
+@pytest.mark.parametrize("name", ["car.dbc", "drive.log"])
+def test_a_binary_file_given_as_the_dbc_is_one_line(tmp_path, name):
+    """A log named as the DBC by mistake (read as a DBC: its suffix names no cantools format) or a .dbc that is no
+    text ended in a UnicodeDecodeError traceback from the repair's reading of its text."""
+    path = config_for(tmp_path, "")
+    (tmp_path / name).write_bytes(b"\x7fELF\x02\x01" + bytes(range(256)) * 4)
+    path.write_text(path.read_text().replace("dbc: car.dbc", f"dbc: {name}"))
+    result = canest("check", "--config", path, check=False)
+    assert result.returncode == 2 and result.stderr.count("\n") == 1, result.stderr
+    assert result.stderr.startswith(f"canest: error: {tmp_path / name}: cannot load DBC (referenced by {path}: "
+                                    "input.dbc): not DBC text (byte ") and "is no cp1252 character" in result.stderr
+
+
 def test_two_messages_on_one_frame_id_are_a_check_error_naming_both(tmp_path):
     dbc = (HERE / "two_messages_one_id.dbc").read_text()
     path = config_for(tmp_path, dbc, yaw_rate="ESC_YawRate.YawRate")

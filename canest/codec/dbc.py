@@ -62,8 +62,12 @@ def _parse(path: Path, owner: str):
         except Exception as exc:
             if known and path.suffix.lower() != ".dbc":
                 raise DbcError(f"{path}: cannot load DBC (referenced by {owner}): {exc}") from None
-            database, repairs = parse_dbc_text(path.read_text(encoding=DBC_ENCODING), str(path),
-                                               f" (referenced by {owner})")
+            try:
+                text = path.read_text(encoding=DBC_ENCODING)
+            except UnicodeDecodeError as undecodable:  # a binary file (a log named by mistake)
+                raise DbcError(f"{path}: cannot load DBC (referenced by {owner}): not DBC text (byte "
+                               f"{undecodable.start} is no {DBC_ENCODING} character)") from None
+            database, repairs = parse_dbc_text(text, str(path), f" (referenced by {owner})")
             return database, _repaired_problems(database, repairs)
         return database, _message_problems(database) or {"": str(strict_error)}
 

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import dataclasses
+import inspect
 import math
 from pathlib import Path
 
@@ -9,7 +10,7 @@ import numpy as np
 
 from canest import limits
 from canest.estimation import catalog
-from canest.filters import FACTORIZATIONS, FILTERS, make_filter
+from canest.filters import FACTORIZATIONS, FILTERS, make_filter, model_options
 from canest.settings import EstimatorConfig
 from canest.yamldoc import Document, suggestion
 
@@ -86,13 +87,30 @@ def _state_file(doc: Document, section: dict) -> str | None:
 
 
 def _check_filter_options(doc: Document, est: EstimatorConfig) -> None:
-    """Build the filter once on a dummy state of the model's size so a wrong option fails at load time, naming the key."""
+    """Each option one the filter takes (not one the catalog or ``factorization`` sets), a positive number where the
+    filter's default is one (every such option is a width, a window, a floor or a rate); then the filter built once
+    on a dummy state of the model's size, so a wrong option fails at load time, naming the key."""
     model = catalog.CATALOG[est.model].model
+    parameters = inspect.signature(FILTERS[est.filter]).parameters
+    set_elsewhere = {"x0", "P0", "factorization", *model_options(est.filter, model)}
+    options = [name for name in parameters if name not in set_elsewhere]
+    for key, value in est.filter_options.items():
+        where = ("estimator", "filter_options", key)
+        if key not in options:
+            raise doc.error(where, f"{est.filter} has no option '{key}'; " + (
+                suggestion(key, options, "its options") if options else "it takes none"))
+        default = parameters[key].default
+        if _positive_number(default) and not _positive_number(value):
+            raise doc.error(where, f"must be a number above 0 (default {default:g}), got {value!r}")
     n = len(model.state_names)
     try:
         make_filter(est.filter, np.zeros(n), np.eye(n), model, est.factorization, est.filter_options)
     except (TypeError, ValueError, ArithmeticError) as exc:
         raise doc.error(("estimator", "filter_options"), f"{est.filter}: {exc}") from None
+
+
+def _positive_number(value) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool) and value > 0
 
 
 def check_model_inputs(doc: Document, est: EstimatorConfig, specs: dict) -> None:
