@@ -31,8 +31,6 @@ _CACHE: dict = {}  # resolved path -> ((size, mtime_ns), database, {message name
 
 def load_database(path, owner: str):
     """The cantools database of ``path``; a :class:`DbcError` naming the file and ``owner`` if it cannot load."""
-    import cantools
-
     path = Path(path).resolve()
     try:
         stat = os.stat(path)
