@@ -258,6 +258,12 @@ def test_a_damaged_csv_is_one_line_naming_file_and_line_a_torn_row_a_warning(dri
     one_line_error(canest("evaluate", truth, estimate), 2, "the arguments look swapped")
     one_line_error(canest("compare", tmp_path / "d.log", text), 65, f"{text}:151: column 'vx'")
     one_line_error(canest("compare", tmp_path / "d.log", tmp_path / "none.csv"), 66, "none.csv: cannot read")
+    elsewhere = tmp_path / "elsewhere.csv"  # another drive's truth: its clock 100 s on (a table of NaN, exit 0)
+    truth_lines = truth.read_text().splitlines(keepends=True)
+    elsewhere.write_text(truth_lines[0] + "".join(f"{float(line.split(',')[0]) + 100.0},{line.split(',', 1)[1]}"
+                                                  for line in truth_lines[1:]))
+    result = canest("compare", tmp_path / "d.log", elsewhere, "--filters", "ckf")
+    assert result.returncode == 65 and "no tick of any filter could be scored" in result.stderr, result.stderr
     for command in (("evaluate", estimate, truth), ("compare", tmp_path / "d.log", truth)):
         one_line_error(canest(*command, "--plot", tmp_path / "p.txt"), 2, "--plot", "cannot write '.txt' files")
     assert not (tmp_path / "p.txt").exists()
@@ -279,6 +285,10 @@ def test_a_damaged_csv_is_one_line_naming_file_and_line_a_torn_row_a_warning(dri
     (("monitor", "-i", "virtual", "-c", "m", "--duration", "nan"), "--duration: seconds above 0"),  # no output
     (("batch", "x.log", "--out", "results", "--workers", "-1"), "--workers: worker processes"),  # hung
     (("batch", "x.log", "--out", "results", "--connect-timeout", "nan"), "--connect-timeout: seconds above 0"),
+    (("evaluate", "x.csv", "y.csv", "--skip", "nan"), "--skip: seconds from 0"),  # blamed the clocks
+    (("evaluate", "x.csv", "y.csv", "--align", "offset", "nan"), "--align offset nan: expected first, none"),
+    (("compare", "x.log", "y.csv", "--filters", ","), "--filters ',': name at least one filter"),  # ran none, exit 0
+    (("compare", "x.log", "y.csv", "--skip", "-1"), "--skip: seconds from 0"),
 ])
 def test_numbers_a_command_cannot_take_are_one_line_before_any_work(tmp_path, arguments, says):
     outputs = ("-o", tmp_path / "d.log", "--truth", tmp_path / "t.csv") if arguments[0] == "simulate" else ()

@@ -95,6 +95,8 @@ def run_filter(config: Config, log_path, truth: dict, name: str, skip: float = 0
 
 def parse_filters(text: str) -> list:
     names = list(FILTERS) if text == "all" else [n.strip() for n in text.split(",") if n.strip()]
+    if not names:
+        raise UsageError(f"--filters {text!r}: name at least one filter (comma-separated), or all")
     unknown = [n for n in names if n not in FILTERS]
     if unknown:
         raise UsageError(f"--filters: unknown filter {unknown[0]!r}; available: all, {', '.join(FILTERS)}")

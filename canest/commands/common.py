@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import math
 import sys
 from pathlib import Path
 
@@ -105,6 +106,14 @@ def check_plot(path) -> None:
     if suffix and suffix not in formats:
         raise UsageError(f"--plot {path}: matplotlib cannot write '.{suffix}' files; name a .png (or "
                          f"{', '.join(f'.{name}' for name in sorted(formats) if name != 'png')})")
+
+
+def check_skip(seconds: float) -> None:
+    """``--skip`` (evaluate, compare): seconds from 0; nan scored nothing and blamed the clocks."""
+    from canest.errors import UsageError
+
+    if not 0.0 <= seconds < math.inf:
+        raise UsageError(f"--skip: seconds from 0 at the start to leave out, got {seconds}")
 
 
 def add_log_reading(parser) -> None:

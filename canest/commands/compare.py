@@ -4,10 +4,12 @@ from __future__ import annotations
 import json
 import sys
 
-from canest.commands.common import FORMATTER, add_config, add_log_reading, check_plot, config_from_args, log_reading
+from canest.commands.common import (FORMATTER, add_config, add_log_reading, check_plot, check_skip,
+                                    config_from_args, log_reading)
 from canest.commands.replay import warnings_to_stderr
 from canest.apps.compare import comparison_json, format_comparison, plot_comparison, run_filter, runnable
 from canest.apps.evaluate import read_table
+from canest.errors import TableError
 
 EPILOG = """examples:
   canest simulate --maneuver dlc --speed 80 --mu 0.85 -o dlc.log --truth dlc.csv
@@ -39,6 +41,7 @@ def register(subparsers) -> None:
 def run(args) -> int:
     if args.plot:  # before the replays, not after them
         check_plot(args.plot)
+    check_skip(args.skip)
     warnings_to_stderr()  # a damaged log's or truth CSV's warnings
     config = config_from_args(args)
     names = runnable(config, args.filters)
@@ -57,4 +60,9 @@ def run(args) -> int:
     if args.plot:
         plot_comparison(runs, truth, args.plot)
         print(f"plot written to {args.plot}", file=sys.stderr if args.json else sys.stdout)
+    if not any(score.samples for run in runs for score in run.scores.values()):
+        span = (lambda t: f"{t[0]:.3f} to {t[-1]:.3f} s" if t.size else "no ticks")
+        raise TableError(f"{args.log}: no tick of any filter could be scored against {args.truth} (truth "
+                         f"{span(truth['t'])}, estimates {span(runs[0].table['t'])}): is it this log's truth? "
+                         "(--skip, the valid bits: canest evaluate --all scores every tick)")
     return 0

@@ -2,9 +2,10 @@
 from __future__ import annotations
 
 import json
+import math
 
 from canest.errors import TableError, UsageError
-from canest.commands.common import FORMATTER, check_plot
+from canest.commands.common import FORMATTER, check_plot, check_skip
 from canest.commands.replay import warnings_to_stderr
 from canest.apps.evaluate import DISPLAY, align, as_json, format_table, plot, read_table, score
 from canest.io.outputs import OutputFile, check_outputs
@@ -46,15 +47,18 @@ def parse_align(words: list) -> tuple:
         return words[0], 0.0
     if len(words) == 2 and words[0] == "offset":
         try:
-            return "offset", float(words[1])
+            seconds = float(words[1])
         except ValueError:
-            pass
+            seconds = math.nan
+        if math.isfinite(seconds):
+            return "offset", seconds
     raise UsageError(f"--align {' '.join(words)}: expected first, none or offset SECONDS, e.g. --align offset "
                      "1712345678.5")
 
 
 def run(args) -> int:
     mode, offset = parse_align(args.align)
+    check_skip(args.skip)
     if args.plot:
         check_plot(args.plot)
         check_outputs({"--plot": args.plot}, {"the estimate CSV": args.estimate, "the truth CSV": args.truth})
