@@ -285,6 +285,12 @@ def test_a_damaged_csv_is_one_line_naming_file_and_line_a_torn_row_a_warning(dri
     (("monitor", "-i", "virtual", "-c", "m", "--duration", "nan"), "--duration: seconds above 0"),  # no output
     (("batch", "x.log", "--out", "results", "--workers", "-1"), "--workers: worker processes"),  # hung
     (("batch", "x.log", "--out", "results", "--connect-timeout", "nan"), "--connect-timeout: seconds above 0"),
+    (("replay", "x.log", "-i", "virtual", "-c", "can7", "--csv", "e.csv"),  # both silently ignored offline
+     "offline replay reads the log and opens no bus; -i/--interface and -c/--channel choose the bus --realtime"),
+    (("replay", "x.log", "--realtime", "-i", "virtual", "--json"),  # text was printed
+     "--realtime plays the log onto a bus (a running daemon estimates); --json belongs to offline replay"),
+    (("replay", "x.log", "--realtime", "-i", "virtual", "--state-file", "s.json", "--output-channel", "o"),
+     "--state-file and --output-channel belong to offline replay"),
     (("evaluate", "x.csv", "y.csv", "--skip", "nan"), "--skip: seconds from 0"),  # blamed the clocks
     (("evaluate", "x.csv", "y.csv", "--align", "offset", "nan"), "--align offset nan: expected first, none"),
     (("compare", "x.log", "y.csv", "--filters", ","), "--filters ',': name at least one filter"),  # ran none, exit 0

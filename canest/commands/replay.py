@@ -143,13 +143,31 @@ def playback_rate(args) -> float:
     return rate
 
 
+def check_mode_options(args) -> None:
+    """A UsageError naming the options the chosen mode would ignore: offline, the buses (it reads the log; only
+    --output-channel, the channel its --out frames carry, counts); with --realtime, what belongs to the estimation
+    (a running daemon's: it reads the bus the log is played onto)."""
+    if args.realtime:
+        ignored = {"--out": args.out, "--csv": args.csv, "--json": args.json, "--state-file": args.state_file,
+                   "--output-interface": args.output_interface, "--output-channel": args.output_channel}
+        why = "--realtime plays the log onto a bus (a running daemon estimates); {} {} to offline replay"
+        verbs = ("belongs", "belong")
+    else:
+        ignored = {"-i/--interface": args.interface, "-c/--channel": args.channel, "-b/--bitrate": args.bitrate,
+                   "--fd": args.fd, "--bus-kwargs": args.bus_kwargs, "--output-interface": args.output_interface}
+        why = "offline replay reads the log and opens no bus; {} {} the bus --realtime plays onto"
+        verbs = ("chooses", "choose")
+    given = [option for option, value in ignored.items() if value]
+    if given:
+        raise UsageError(why.format(" and ".join(given), verbs[len(given) > 1]))
+
+
 def run(args) -> int:
+    check_mode_options(args)
     config = config_from_args(args)
     warnings_to_stderr()
     rate = playback_rate(args)
     if args.realtime:
-        if args.out or args.csv:
-            raise UsageError("--realtime plays the log onto a bus; --out and --csv belong to offline replay")
         bus = open_bus(config.input_bus.kwargs(), "playback")
         try:
             sent = play(args.log, bus, speed=rate, progress=not args.quiet, **log_reading(args))
