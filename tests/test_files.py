@@ -121,6 +121,15 @@ def test_a_disk_that_fills_up_midway_is_one_line_and_no_partial_file(drive, tmp_
     assert list(tmp_path.iterdir()) == []
 
 
+@pytest.mark.parametrize("command", ["replay", "simulate"])
+def test_a_log_format_no_reader_reads_back_is_refused_and_nothing_written(drive, tmp_path, command):
+    """python-can writes .txt as a printout; canest's reader (and python-can's) refused the file it had written."""
+    arguments = [drive[0], "--out"] if command == "replay" else ["--truth", tmp_path / "t.csv", "-o"]
+    one_line_error(canest(command, *arguments, tmp_path / "frames.txt"), 2, "frames.txt: python-can writes '.txt' as "
+                   "a printout no reader (canest's either) reads back; name a log: .log (candump)")
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_outputs_that_cannot_be_created_exit_73(drive, tmp_path):
     one_line_error(canest("replay", drive[0], "--csv", "/sys/canest-est.csv", "-q"), 73,
                    "/sys/canest-est.csv: cannot create:")

@@ -34,6 +34,7 @@ import can
 from canest.errors import DependencyError, UsageError
 from canest.estimation.estimate import CAUSE_GROUPS
 from canest.estimation.learned_parameters import NAMES
+from canest.io.logfiles import KNOWN_SUFFIXES, log_format
 from canest.io.outputs import OutputFile
 
 
@@ -180,6 +181,11 @@ def exact_mf4_writer(path):
 
 def open_frame_writer(output: OutputFile):
     """python-can's writer for ``output`` (a ``can.Listener``): by suffix, or candump ``-L`` text on stdout."""
+    suffix, _ = log_format(output.path)
+    if not output.stdout and suffix in can.io.logger.MESSAGE_WRITERS and suffix not in KNOWN_SUFFIXES:
+        output.discard()
+        raise UsageError(f"{output.path}: python-can writes '{suffix}' as a printout no reader (canest's either) reads "
+                         "back; name a log: .log (candump), .asc, .blf, .trc, .csv, .mf4")
     try:
         if output.stdout:
             return can.CanutilsLogWriter(output.open_text())
