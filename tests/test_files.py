@@ -225,6 +225,13 @@ def test_a_log_none_of_whose_frames_decode_exits_65_naming_the_causes_with_its_o
     assert len(modes) > 250 and set(modes) == {"no_input"}
 
 
+def test_a_log_without_a_finite_timestamp_says_so_not_to_compare_ids(drive, tmp_path):
+    timeless = "".join(f"(nan) {line.split(') ', 1)[1]}" for line in drive[0].read_text().splitlines(keepends=True))
+    (tmp_path / "timeless.log").write_text(timeless)
+    one_line_error(canest("replay", tmp_path / "timeless.log", "-q"), 65, f"rejected_timestamp={drive[1]}",
+                   "its frames have no finite timestamp")  # it said to compare the IDs and CAN FD flags
+
+
 def test_missing_optional_packages_exit_69_naming_the_remedy(drive, tmp_path):
     one_line_error(canest_blocking("asammdf", "replay", drive[0], "--out", tmp_path / "est.mf4", "-q"), 69,
                    f"{tmp_path / 'est.mf4'}: The asammdf package was not found", "[mf4]")
@@ -301,6 +308,7 @@ def test_a_damaged_csv_is_one_line_naming_file_and_line_a_torn_row_a_warning(dri
     (("replay", "x.log", "--realtime", "-i", "virtual", "--state-file", "s.json", "--output-channel", "o"),
      "--state-file and --output-channel belong to offline replay"),
     (("evaluate", "x.csv", "y.csv", "--skip", "nan"), "--skip: seconds from 0"),  # blamed the clocks
+    (("batch", "x.log", "--out", "README.md"), "--out README.md: that is a file; name the results folder"),
     (("evaluate", "x.csv", "y.csv", "--align", "offset", "nan"), "--align offset nan: expected first, none"),
     (("compare", "x.log", "y.csv", "--filters", ","), "--filters ',': name at least one filter"),  # ran none, exit 0
     (("compare", "x.log", "y.csv", "--skip", "-1"), "--skip: seconds from 0"),
@@ -308,7 +316,7 @@ def test_a_damaged_csv_is_one_line_naming_file_and_line_a_torn_row_a_warning(dri
 def test_numbers_a_command_cannot_take_are_one_line_before_any_work(tmp_path, arguments, says):
     outputs = ("-o", tmp_path / "d.log", "--truth", tmp_path / "t.csv") if arguments[0] == "simulate" else ()
     arguments = [tmp_path / word if word in ("x.log", "results") else word for word in arguments]
-    one_line_error(canest(*arguments, *outputs), 2, says)
+    one_line_error(canest(*arguments, *outputs), 73 if "README.md" in arguments else 2, says)
     assert list(tmp_path.iterdir()) == []
 
 

@@ -14,7 +14,7 @@ from canest.apps.batch_plan import FLEET_SUMMARY
 from canest.apps.fleet_report import fleet_json, fleet_table, plot_errors, totals
 from canest.commands.common import FORMATTER, add_config, add_log_reading, check_plot, config_from_args, log_reading
 from canest.apps.compare import runnable
-from canest.errors import DependencyError, UsageError
+from canest.errors import DependencyError, OutputFileError, UsageError
 
 EPILOG = """examples:
   canest batch 'logs/**/*.log' --config configs/dici_ev.yaml --out results/
@@ -81,14 +81,16 @@ def stop_on_signals(stop: Stop):
 
 
 def check_cluster_options(args) -> None:
-    """--workers, --retries and --connect-timeout, before anything runs (a negative worker count hung the local
-    cluster; a nan timeout read as a connection failure)."""
+    """--workers, --retries, --connect-timeout and --out, before anything runs (a negative worker count hung the
+    local cluster; a nan timeout read as a connection failure; a file as --out failed every task)."""
     if args.workers is not None and args.workers < 1:
         raise UsageError(f"--workers: worker processes of the local cluster, at least 1, got {args.workers}")
     if args.retries < 0:
         raise UsageError(f"--retries: retries of a failed task, 0 or more, got {args.retries}")
     if not 0.0 < args.connect_timeout < math.inf:
         raise UsageError(f"--connect-timeout: seconds above 0, got {args.connect_timeout}")
+    if Path(args.out).exists() and not Path(args.out).is_dir():
+        raise OutputFileError(f"--out {args.out}: that is a file; name the results folder (created if missing)")
 
 
 def run(args) -> int:

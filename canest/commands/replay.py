@@ -193,12 +193,19 @@ def run(args) -> int:
     return 0
 
 
+# the most frequent cause of a log none of whose frames decoded -> what to do
+NOTHING_DECODED = {
+    "": "compare the log's IDs and CAN FD flags with the config's input DBC (canest check --config ...)",
+    "rejected_timestamp": "its frames have no finite timestamp; re-export the log with the logger's own times",
+}
+
+
 def nothing_decoded(log, summary: dict) -> None:
     """A LogError (exit 65) when frames were read and none decoded into an input: every tick was ``no_input``."""
     if summary.get("frames", 0) and not summary.get("decoded", 0):
         causes = sorted(((n, k) for k, n in summary.items() if k.startswith(("rejected_", "ignored_")) and n),
                         reverse=True)
         named = ", ".join(f"{k}={n}" for n, k in causes[:3]) or "no cause counted"
+        remedy = NOTHING_DECODED.get(causes[0][1] if causes else "", NOTHING_DECODED[""])
         raise LogError(f"{log}: none of its {summary['frames']} frames decoded into an input ({named}); "
-                       "the outputs hold only no_input ticks: compare the log's IDs and CAN FD flags with the "
-                       "config's input DBC (canest check --config ...)")
+                       f"the outputs hold only no_input ticks: {remedy}")
