@@ -97,6 +97,11 @@ def test_an_output_id_the_car_sends_on_the_same_bus_is_refused_by_the_config_and
                                                                "CE_Velocity has ID 0x130"), result.stderr
 
 
+def test_a_dbc_path_naming_a_folder_says_so(tmp_path):
+    path = write_variant(tmp_path, lambda d: d["input"].update(dbc="../dbc"))  # it said "DBC file not found"
+    assert re.search(r"car\.yaml:\d+: input\.dbc: .*dbc is a folder; name the DBC file in it", error_of(path))
+
+
 def test_unknown_message(tmp_path):
     path = write_variant(tmp_path, lambda d: d["input"]["signals"].update(ax="NOPE.LongAccel"))
     assert "input.signals.ax.signal: no message 'NOPE'" in error_of(path)

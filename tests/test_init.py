@@ -100,6 +100,7 @@ def test_init_never_replaces_a_file(tmp_path):
     one_line_error(canest("init", "--dbc", ford_dbc(), "--out", link), 73, "never replaces")
     assert not (tmp_path / "nowhere.yaml").exists()
     assert sorted(p.name for p in tmp_path.iterdir()) == ["dangling.yaml", "mine.yaml"]  # no temporary left
+    one_line_error(canest("init", "--dbc", ford_dbc(), "--out", tmp_path), 73, "that is a folder")  # said "exists"
 
 
 def test_a_dbc_without_accelerometers_is_one_line_naming_the_inputs_it_lacks_and_nothing_is_written(tmp_path):

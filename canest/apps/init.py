@@ -213,6 +213,8 @@ def write_new(path, text: str, command: str = "init") -> None:
         with open_stdout() as handle:
             handle.write(text)
         return
+    if os.path.isdir(path):
+        raise OutputFileError(f"{path}: that is a folder; name the new file in it")
     if os.path.lexists(path):
         raise OutputFileError(f"{path}: exists; {command} never replaces a file: choose another --out or move it away")
     output = OutputFile(path)

@@ -64,6 +64,8 @@ def _dbc_path(doc: Document, key_path: tuple) -> Path:
     path = (doc.path.resolve().parent / given).resolve()
     if path.is_file():
         return path
+    if path.is_dir():
+        raise doc.error(key_path, f"{path} is a folder; name the DBC file in it")
     hint = f" (canest's own is '{BUILTIN_PREFIX}{path.name}')" if path.name in builtin else ""
     raise doc.error(key_path, f"DBC file not found: {path}{hint}")
 
