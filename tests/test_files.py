@@ -272,6 +272,7 @@ def test_a_damaged_csv_is_one_line_naming_file_and_line_a_torn_row_a_warning(dri
     header_only.write_text(lines[0])
     one_line_error(canest("evaluate", estimate, header_only), 65, f"{header_only}: no rows under the header")
     one_line_error(canest("evaluate", truth, estimate), 2, "the arguments look swapped")
+    one_line_error(canest("compare", tmp_path / "d.log", estimate), 2, "has the 'valid' column of an estimate CSV")
     one_line_error(canest("compare", tmp_path / "d.log", text), 65, f"{text}:151: column 'vx'")
     one_line_error(canest("compare", tmp_path / "d.log", tmp_path / "none.csv"), 66, "none.csv: cannot read")
     elsewhere = tmp_path / "elsewhere.csv"  # another drive's truth: its clock 100 s on (a table of NaN, exit 0)

@@ -9,7 +9,7 @@ from canest.commands.common import (FORMATTER, add_config, add_log_reading, chec
 from canest.commands.replay import warnings_to_stderr
 from canest.apps.compare import comparison_json, format_comparison, plot_comparison, run_filter, runnable
 from canest.apps.evaluate import read_table
-from canest.errors import TableError
+from canest.errors import TableError, UsageError
 
 EPILOG = """examples:
   canest simulate --maneuver dlc --speed 80 --mu 0.85 -o dlc.log --truth dlc.csv
@@ -46,6 +46,9 @@ def run(args) -> int:
     config = config_from_args(args)
     names = runnable(config, args.filters)
     truth = read_table(args.truth)
+    if "valid" in truth:
+        raise UsageError(f"{args.truth} has the 'valid' column of an estimate CSV: give the drive's truth (canest "
+                         "simulate --truth writes one), the filters' estimates are what compare makes")
     runs = []
     for name in names:
         runs.append(run_filter(config, args.log, truth, name, args.skip, **log_reading(args)))
