@@ -257,7 +257,7 @@ def test_a_damaged_csv_is_one_line_naming_file_and_line_a_torn_row_a_warning(dri
     assert canest("replay", tmp_path / "d.log", "--csv", estimate, "-q").returncode == 0
     lines = estimate.read_text().splitlines(keepends=True)
     torn = tmp_path / "torn.csv"
-    torn.write_text("".join(lines[:150]) + "1.5,22.2\n" + "".join(lines[150:]))
+    torn.write_text("".join(lines[:150]) + "1.5,22.2\n" + "".join(lines[150:]) + "\n")  # and a blank line
     result = canest("evaluate", torn, truth)
     assert result.returncode == 0 and "yaw_rate" in result.stdout
     assert result.stderr.startswith(f"canest: warning: {torn}: left out 1 line(s)") and "line 151, 2 fields" in \

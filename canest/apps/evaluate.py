@@ -49,7 +49,8 @@ def read_table(path) -> dict:
     A TableError (65) names the file, and the line where one is to blame, for what cannot be scored: no text, no
     header, no ``t`` column, no row, a text cell in a column of numbers (an empty cell there is nan). Rows whose
     field count is not the header's (a file cut mid-write) are left out with one warning naming the file, the
-    first such line and how many; a file that does not exist or may not be read is an InputFileError (66)."""
+    first such line and how many, blank lines without one; a file that does not exist or may not be read is an
+    InputFileError (66)."""
     try:
         with (open(sys.stdin.fileno(), newline="", closefd=False) if is_stdio(path)
               else open(path, newline="", encoding="utf-8")) as handle:
@@ -57,7 +58,8 @@ def read_table(path) -> dict:
             header = next(reader, None)
             rows, torn = [], []
             for row in reader:
-                (rows if len(row) == len(header) else torn).append((reader.line_num, row))
+                if row:  # a blank line holds nothing
+                    (rows if len(row) == len(header) else torn).append((reader.line_num, row))
     except UnicodeDecodeError as exc:
         raise TableError(f"{path}: not a text CSV (byte {exc.start} is not UTF-8): name a CSV such as canest replay "
                          "--csv or canest simulate --truth writes") from None
