@@ -72,8 +72,9 @@ def folder_as_the_examples_assume(where):
     shutil.copy(ROOT / "configs" / "dici_ev.yaml", where / "my_car.yaml")
     (where / "my_car.yaml").write_text((where / "my_car.yaml").read_text().replace("../dbc/", f"{ROOT}/dbc/"))
     shutil.copy(ford_dbc(), where / ford_dbc().name)
-    for index, mu in enumerate(("0.85", "0.7", "0.6"), start=1):
-        run(f"canest simulate -m dlc --speed 70 --mu {mu} --seed {index} -o drive{index}.log --truth drive{index}.csv")
+    for index in (1, 2, 3):  # calibrate's: country roads, which pin every parameter down (a DLC does not)
+        run(f"canest simulate -m country --duration 30 --seed {index + 2} -o drive{index}.log "
+            f"--truth drive{index}.csv")
     run("canest simulate -m dlc --seed 5 -o drive.blf --truth drive.blf.truth.csv")
     for folder, name in (("logs/day1", "a.log"), ("logs/day2", "b.log"), ("logs", "c.blf")):
         (where / folder).mkdir(parents=True, exist_ok=True)
