@@ -34,6 +34,9 @@ SHARED = (
 BOUNDS = {p.name: (p.low, p.high) for p in SHARED}  # name -> (low, high): what a calibration may find
 BANK = Parameter("bank", 0.0, math.radians(0.5), -math.radians(15.0), math.radians(15.0))
 STIFFNESSES = ("front", "rear")
+# rad/s^2: a yaw rate changing slower is steady (the online calibration's steady blocks, the offline fit's ticks for the
+# second gyro's bias): two gyros sampled apart in time then read one yaw rate
+MAX_YAW_ACCELERATION = 0.05
 BOUND_TOLERANCE = 1e-3  # of a parameter's scale: a fitted value this close to a bound is at it
 CONFIDENCE = 1.96  # a 95 % two-sided interval in standard deviations
 # relative, 1 std: how far the linear tires' cornering stiffness read from driving is from the tires' small-slip

@@ -70,7 +70,7 @@ from types import MappingProxyType
 
 import numpy as np
 
-from canest.calibration import MODEL_ERROR, RADIUS_DRIFT, STIFFNESS_MODEL_ERROR, STIFFNESSES
+from canest.calibration import MAX_YAW_ACCELERATION, MODEL_ERROR, RADIUS_DRIFT, STIFFNESS_MODEL_ERROR, STIFFNESSES
 from canest.estimation.calibration_blocks import Block, BlockMeans
 from canest.estimation.calibration_state import CalibrationStore
 from canest.estimation.inputs import WHEEL_SPEEDS
@@ -89,7 +89,6 @@ MIN_SPEED = 5.0  # m/s
 MIN_STEER_SPEED = 8.0  # m/s: slower, the slip angles leave the linear single-track model
 LINEAR_AY = 2.5  # m/s^2
 MIN_BEND_AY = 0.5  # m/s^2: a bend that excites the steering ratio and the understeer gradient
-MAX_YAW_ACCELERATION = 0.05  # rad/s^2 over the history: steady
 MAX_STEERING_RATE = math.radians(5.0)  # rad/s at the steering wheel over the history: steady
 MAX_AX = 2.0  # m/s^2: harder braking slips the wheels and pitches the body
 STANDSTILL = 0.05  # m/s

@@ -13,9 +13,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from canest.calibration import CONFIDENCE, Fit, widening
+from canest.calibration import CONFIDENCE, MAX_YAW_ACCELERATION, Fit, widening
 
-MAX_YAW_ACCELERATION = 0.05  # rad/s^2, as the online calibration's steady blocks
 SPAN = 0.4  # s over which a tick's yaw acceleration is taken (the 50 Hz gyro's noise, differenced tick to tick, is
 # 0.1 rad/s^2 on the simulator)
 MIN_TICKS = 50  # steady ticks with both gyros below which the second gyro's bias is not given
