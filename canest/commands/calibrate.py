@@ -10,8 +10,8 @@ from tqdm import tqdm
 from canest.models.output_error import calibrate, optimizer
 from canest.apps.calibrated_config import bank_lines, check_new, write_calibrated
 from canest.apps.drive_signals import check_signals, read_drive
-from canest.commands.common import FORMATTER, add_config, add_log_reading, config_from_args, log_reading
-from canest.commands.replay import warnings_to_stderr
+from canest.commands.common import (FORMATTER, add_config, add_log_reading, config_from_args, log_reading,
+                                    warnings_to_stderr)
 from canest.config import DEFAULT_CONFIG
 from canest.errors import LogError
 from canest.estimation.learned_parameters import parameters

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import logging
 import math
 import sys
 from pathlib import Path
@@ -114,6 +115,19 @@ def check_skip(seconds: float) -> None:
 
     if not 0.0 <= seconds < math.inf:
         raise UsageError(f"--skip: seconds from 0 at the start to leave out, got {seconds}")
+
+
+def warnings_to_stderr() -> None:
+    """canest's warnings (a damaged log or CSV, an empty log, an input never delivered) as ``canest: warning: ...``
+    lines on stderr, once however often it is called."""
+    logger = logging.getLogger("canest")
+    if any(handler.name == "canest-warnings" for handler in logger.handlers):
+        return
+    handler = logging.StreamHandler(sys.stderr)
+    handler.name = "canest-warnings"
+    handler.setFormatter(logging.Formatter("canest: warning: %(message)s"))
+    logger.addHandler(handler)
+    logger.propagate = False
 
 
 def add_log_reading(parser) -> None:

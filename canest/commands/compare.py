@@ -5,8 +5,7 @@ import json
 import sys
 
 from canest.commands.common import (FORMATTER, add_config, add_log_reading, check_plot, check_skip,
-                                    config_from_args, log_reading)
-from canest.commands.replay import warnings_to_stderr
+                                    config_from_args, log_reading, warnings_to_stderr)
 from canest.apps.compare import comparison_json, format_comparison, plot_comparison, run_filter, runnable
 from canest.apps.evaluate import read_table
 from canest.errors import TableError, UsageError

@@ -5,8 +5,7 @@ import json
 import math
 
 from canest.errors import TableError, UsageError
-from canest.commands.common import FORMATTER, check_plot, check_skip
-from canest.commands.replay import warnings_to_stderr
+from canest.commands.common import FORMATTER, check_plot, check_skip, warnings_to_stderr
 from canest.apps.evaluate import DISPLAY, align, as_json, format_table, plot, read_table, score
 from canest.io.outputs import OutputFile, check_outputs
 

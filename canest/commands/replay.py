@@ -3,7 +3,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import logging
 import math
 import signal
 import sys
@@ -14,7 +13,7 @@ from canest.errors import LogError, UsageError
 from canest.io.bus import open_bus
 from canest.io.outputs import check_outputs, is_stdio
 from canest.commands.common import (FORMATTER, add_bus_overrides, add_config, add_log_reading, add_state_file,
-                                    config_from_args, log_reading, state_file_output)
+                                    config_from_args, log_reading, state_file_output, warnings_to_stderr)
 from canest.pipeline import format_summary
 from canest.apps.replay import play, replay
 
@@ -114,18 +113,6 @@ class StopRequest:
         finally:
             for s, h in previous.items():
                 signal.signal(s, h)
-
-
-def warnings_to_stderr() -> None:
-    """The replay's warnings (damaged log, empty log) as ``canest: warning: ...`` lines on stderr."""
-    logger = logging.getLogger("canest")
-    if any(handler.name == "canest-warnings" for handler in logger.handlers):
-        return
-    handler = logging.StreamHandler(sys.stderr)
-    handler.name = "canest-warnings"
-    handler.setFormatter(logging.Formatter("canest: warning: %(message)s"))
-    logger.addHandler(handler)
-    logger.propagate = False
 
 
 def playback_rate(args) -> float:
