@@ -103,6 +103,11 @@ def _column(path, name: str, cells: list) -> np.ndarray:
     raise TableError(f"{path}:{line}: column '{name}' holds {text!r} where its other rows hold numbers")
 
 
+def time_span(t: np.ndarray) -> str:
+    """A table's times as ``first to last s`` (``no ticks`` when empty), for a message on why nothing was scored."""
+    return f"{t[0]:.3f} to {t[-1]:.3f} s" if t.size else "no ticks"
+
+
 def table_of(estimates) -> dict:
     """Estimates (:class:`canest.estimation.estimate.Estimate`) as the columns :func:`read_table` reads from a
     replay's CSV: ``t``, every published value and its ``_std``, and ``valid`` (the mask over ``VALID_BITS``)."""

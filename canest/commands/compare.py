@@ -7,7 +7,7 @@ import sys
 from canest.commands.common import (FORMATTER, add_config, add_log_reading, check_plot, check_skip,
                                     config_from_args, log_reading, warnings_to_stderr)
 from canest.apps.compare import comparison_json, format_comparison, plot_comparison, run_filter, runnable
-from canest.apps.evaluate import read_table
+from canest.apps.evaluate import read_table, time_span
 from canest.errors import TableError, UsageError
 
 EPILOG = """examples:
@@ -63,8 +63,7 @@ def run(args) -> int:
         plot_comparison(runs, truth, args.plot)
         print(f"plot written to {args.plot}", file=sys.stderr if args.json else sys.stdout)
     if not any(score.samples for run in runs for score in run.scores.values()):
-        span = (lambda t: f"{t[0]:.3f} to {t[-1]:.3f} s" if t.size else "no ticks")
         raise TableError(f"{args.log}: no tick of any filter could be scored against {args.truth} (truth "
-                         f"{span(truth['t'])}, estimates {span(runs[0].table['t'])}): is it this log's truth? "
-                         "(--skip, the valid bits: canest evaluate --all scores every tick)")
+                         f"{time_span(truth['t'])}, estimates {time_span(runs[0].table['t'])}): is it this log's "
+                         "truth? (--skip, the valid bits: canest evaluate --all scores every tick)")
     return 0

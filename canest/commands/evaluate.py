@@ -6,7 +6,7 @@ import math
 
 from canest.errors import TableError, UsageError
 from canest.commands.common import FORMATTER, check_plot, check_skip, warnings_to_stderr
-from canest.apps.evaluate import DISPLAY, align, as_json, format_table, plot, read_table, score
+from canest.apps.evaluate import DISPLAY, align, as_json, format_table, plot, read_table, score, time_span
 from canest.io.outputs import OutputFile, check_outputs
 
 EPILOG = """examples:
@@ -94,7 +94,6 @@ def check_roles(args, estimate: dict, truth: dict) -> None:
 
 def nothing_scored(args, estimate, truth) -> str:
     """Why no tick could be scored, and what to try."""
-    span = (lambda t: f"{t[0]:.3f} to {t[-1]:.3f} s" if t.size else "no ticks")
-    return (f"{args.estimate}: no tick could be scored against {args.truth}: estimate times {span(estimate['t'])}, "
-            f"truth {span(truth['t'])}; put them on one clock with --align first or --align offset SECONDS, or "
-            "check the valid column (--all scores every tick)")
+    return (f"{args.estimate}: no tick could be scored against {args.truth}: estimate times "
+            f"{time_span(estimate['t'])}, truth {time_span(truth['t'])}; put them on one clock with --align first or "
+            "--align offset SECONDS, or check the valid column (--all scores every tick)")
