@@ -288,8 +288,9 @@ def test_a_damaged_csv_is_one_line_naming_file_and_line_a_torn_row_a_warning(dri
 
 @pytest.mark.parametrize("arguments, says", [
     (("simulate", "--duration", "1e-9"), "--duration: seconds from 0.1, got 1e-09"),  # was ZeroDivisionError
-    (("simulate", "--mu-jump", "nan:0.3"), "--mu-jump: expected T:MU with T from 0 to the drive's"),  # ValueError
-    (("simulate", "--mu-jump", "20:0.3", "--duration", "5"), "from 0 to the drive's 5 s"),  # never jumped
+    (("simulate", "--mu-jump", "nan:0.3"), "--mu-jump: expected T:MU with T >= 0 s"),  # ValueError
+    (("simulate", "--mu-jump", "20:0.3", "--duration", "5"), "--mu-jump: the friction jump at 20 s is not within "
+                                                             "the drive's 5 s"),  # never jumped
     (("simulate", "--mu-jump", "1:9"), "--mu-jump: expected one or four values"),  # said --mu
     (("simulate", "--noise-scale", "nan"), "--noise-scale: a scale from 0 to 10"),  # ValueError in cantools
     (("simulate", "-m", "sine", "--amplitude", "nan"), "--amplitude: sine takes steering wheel deg"),

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from canest.commands.simulate import parse_mu_jump
+from canest.errors import SimulationError
 from canest.signals import WHEELS
 from canest.sim.maneuvers import Driver
 from canest.models.attitude import level_reading, per_si, tilted_reading
@@ -37,12 +38,17 @@ def test_friction_jump_changes_the_road_at_its_time(config):
 
 def test_friction_jump_option_is_checked():
     with pytest.raises(ValueError, match="--mu-jump: expected T:MU"):
-        parse_mu_jump("six:0.3", 13.0)
+        parse_mu_jump("six:0.3")
     with pytest.raises(ValueError, match="--mu-jump: expected one or four values"):
-        parse_mu_jump("6:2.5", 13.0)
-    with pytest.raises(ValueError, match="T from 0 to the drive's 5 s"):
-        parse_mu_jump("6:0.35", 5.0)
-    assert parse_mu_jump("6:0.35", 13.0) == (6.0, 0.35)
+        parse_mu_jump("6:2.5")
+    with pytest.raises(ValueError, match=r"--mu-jump: expected T:MU with T >= 0 s"):
+        parse_mu_jump("nan:0.3")
+    assert parse_mu_jump("6:0.35") == (6.0, 0.35)
+
+
+def test_a_friction_jump_after_the_drive_is_refused_not_silently_skipped(config):
+    with pytest.raises(SimulationError, match="friction jump at 6 s is not within the drive's 5 s"):
+        simulate(config, "sine", 60.0, 0.85, duration=5.0, mu_jump=(6.0, 0.3))
 
 
 def test_a_drawn_car_is_as_wrong_as_its_config_admits(config):

@@ -76,13 +76,17 @@ def simulate(config: Config, maneuver: str, speed_kmh: float, mu, *, duration=No
     ``mismatch``: how the simulated car differs from ``config`` (:mod:`canest.sim.mismatch`); the frames are
     encoded through ``config``, so a replay with it runs on a wrong config.
 
-    ``mu_jump = (t, mu)``: the road's friction changes to ``mu`` (scalar or four) at ``t`` s into the run.
+    ``mu_jump = (t, mu)``: the road's friction changes to ``mu`` (scalar or four) at ``t`` s into the run (a
+    SimulationError if the drive is over by then).
     ``vibration``: scale of the IMU's body vibration and road spikes (:mod:`canest.sim.sensors`; 0 none).
     ``crosswind``: scale of the gusts' side force (:mod:`canest.sim.wind`; 0 none, 1 a gusty day's).
     """
     rng = np.random.default_rng(seed)
     speed = speed_kmh / 3.6
     plan = make_maneuver(maneuver, speed, amplitude_deg, duration, seed)
+    if mu_jump is not None and not 0.0 <= mu_jump[0] < plan.duration:  # it would never happen
+        raise SimulationError(f"--mu-jump: the friction jump at {mu_jump[0]:g} s is not within the drive's "
+                              f"{plan.duration:g} s: jump earlier or drive longer (--duration)")
     vehicle = true_vehicle(config.vehicle, mismatch)
     plant = TwoTrackPlant(vehicle, mu, mismatch.tire(), mismatch.bank_acceleration, mismatch.grade_acceleration,
                           PRESSURE_CENTRE)
