@@ -144,6 +144,22 @@ def test_a_log_of_several_channels_read_as_one_is_warned_about_listing_them(conf
     assert f"can0 ({drive} frames), can1 ({body} frames)" in result.stderr and "--log-channel" in result.stderr
 
 
+def test_an_error_frame_stays_on_its_bus(sim, tmp_path):
+    """candump writes an error frame's interface like any frame's; python-can's reader drops it (channel None)."""
+    frames = [can.Message(timestamp=f.timestamp, arbitration_id=f.arbitration_id, is_extended_id=f.is_extended_id,
+                          data=f.data, channel="can0") for f in sim.frames]
+    error = can.Message(timestamp=frames[10].timestamp + 1e-4, is_error_frame=True, channel="can0")
+    path = write(frames[:11] + [error] + frames[11:], tmp_path / "drive.log", can.CanutilsLogWriter)
+    assert " can0 2000" in path.read_text()  # written with its interface
+    result = canest("replay", path, "--log-channel", "can0", "--json")
+    assert result.returncode == 0, result.stderr
+    summary = json.loads(result.stdout)
+    assert summary["frames"] == len(frames) + 1 and "log_other_channel" not in summary
+    assert summary["rejected_error_frame"] == 1
+    result = canest("replay", path, "--json")
+    assert "several channels" not in result.stderr and "None" not in result.stderr
+
+
 def test_a_channel_the_log_does_not_hold_is_warned_about_with_the_channels_it_does(two_buses):
     path, drive, body = two_buses
     result = canest("replay", path, "--log-channel", "vcan0", "--json")

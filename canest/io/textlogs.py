@@ -125,7 +125,15 @@ class HeaderOnce(Resumable):
 
 
 class CandumpLines(Resumable, can.CanutilsLogReader):
-    """candump ``-L`` lines."""
+    """candump ``-L`` lines; an error frame keeps its line's interface (python-can's reader leaves its channel None,
+    and a log of several buses then listed a channel "None")."""
+
+    def __iter__(self):
+        for msg in super().__iter__():
+            if msg.is_error_frame and msg.channel is None:
+                interface = self.file.pending.split()[1]
+                msg.channel = int(interface) if interface.isdigit() else interface
+            yield msg
 
 
 class AscLines(HeaderOnce, can.ASCReader):
