@@ -102,6 +102,9 @@ class Pipeline:
         """Every frame accounted for: decoded, ignored by ID, rejected by cause; and timing events."""
         repairs = self.estimator.filter.repairs if self.estimator.filter is not None else 0
         summary = {**self.decoder.counts, **self.counts, "resets": self.estimator.resets, "repairs": repairs}
+        store = self.calibration.store
+        if store is not None and store.failed_saves:
+            summary["state_save_failures"] = store.failed_saves  # warned as they happened; the estimation went on
         hours = self.ticked * self.clock.dt / 3600.0
         if self.estimator.resets and hours:
             summary["resets_per_hour"] = round(self.estimator.resets / hours, 1)  # divergence resets, per hour driven

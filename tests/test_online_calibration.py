@@ -747,10 +747,26 @@ def test_save_is_atomic_a_failed_rename_keeps_the_old_state_and_leaves_no_tempor
 
     monkeypatch.setattr(os, "replace", failing_replace)
     calibration.x[0] = 1.1
-    with pytest.raises(OSError):
-        store.save(calibration.state())
+    assert store.save(calibration.state()) is False and store.failed_saves == 1  # warned, never raised
     assert path.read_text() == old and sorted(p.name for p in tmp_path.iterdir()) == ["calibration.json"]
     assert renames == [(str(tmp_path), str(path))]  # written beside the target: the rename cannot cross a filesystem
+    monkeypatch.undo()
+    assert store.save(calibration.state()) is True and json.loads(path.read_text()) != json.loads(old)
+
+
+def test_a_state_file_the_disk_refuses_is_warned_about_and_the_replay_goes_on(drive, tmp_path):
+    """A full or read-only disk ended the daemon (exit 74) at its first save, mid-drive; /proc takes no folder."""
+    log, state = tmp_path / "drive.log", Path("/proc/canest-test/calibration.json")
+    drive.write_log(log)
+    result = subprocess.run([sys.executable, "-m", "canest", "replay", str(log), "--config", str(CONFIG),
+                             "--state-file", str(state), "--json", "--csv", str(tmp_path / "estimates.csv")],
+                            capture_output=True, text=True)
+    assert result.returncode == 0, result.stderr
+    assert result.stderr.count(f"cannot save the calibration state to {state}") == 1, result.stderr
+    summary = json.loads(result.stdout)
+    assert summary["state_save_failures"] >= 1
+    rows = (tmp_path / "estimates.csv").read_text().splitlines()
+    assert float(rows[-1].split(",")[0]) > drive.truth["t"][-1] - 0.1  # estimated to the drive's end
 
 
 def test_a_state_of_an_older_canest_restores_what_it_holds_and_the_rest_starts_from_its_prior(config, learned,
@@ -762,8 +778,10 @@ def test_a_state_of_an_older_canest_restores_what_it_holds_and_the_rest_starts_f
     CalibrationStore(path).save(older)
     with caplog.at_level(logging.INFO, logger="canest"):
         restarted = OnlineCalibration(config.vehicle, tuple(learned[0].calibration.index), 0.01, CalibrationStore(path))
+    restored = ", ".join(older)
     assert [r.getMessage() for r in caplog.records] == [
-        f"{path} holds no front, rear (written by an older canest): learning them from their prior"]
+        f"{path} holds no front, rear (written by an older canest): learning them from their prior",
+        f"restored the calibration state from {path} ({restored}), variances widened {RELOAD_INFLATION:g}x"]
     front, speed = NAMES.index("front"), NAMES.index("speed")
     assert restarted.x[speed] == pytest.approx(state["speed"]["value"]) and restarted.evidence[speed] > 0.0
     assert restarted.x[front] == 1.0 and restarted.std[front] == pytest.approx(restarted.specs[front].std)

@@ -13,7 +13,8 @@ file, and learning starts afresh. A file that is no calibration state at all
 mistake) is never written over: the first save moves it aside to
 ``NAME.unreadable`` (``.unreadable.1``, ... if taken) and says so. A parameter
 the file does not hold (one a newer canest learns than the one that wrote it)
-starts from its prior, the others are restored, and one line says which.
+starts from its prior, the others are restored, and one line says which. A save
+the disk refuses is warned about and counted, never raised: the daemon estimates on.
 """
 from __future__ import annotations
 
@@ -37,11 +38,31 @@ class CalibrationStore:
         self.path = Path(path)
         self.interval = interval
         self.foreign = False  # the file at ``path`` is no calibration state (:meth:`load`): moved aside before a save
+        self.failed_saves = 0
+        self.failure = None  # why the last save failed, until one succeeds
 
-    def save(self, parameters: dict) -> None:
+    def save(self, parameters: dict) -> bool:
         """Write ``parameters`` (name -> FIELDS) atomically: temporary file, fsync, rename; a file that is no
-        calibration state moved aside first (module docstring)."""
-        text = json.dumps({"version": VERSION, "parameters": parameters}, indent=1, sort_keys=True)
+        calibration state moved aside first (module docstring). A save the disk refuses (full, read-only, a folder
+        gone) is warned about, counted in :attr:`failed_saves` and False: the estimation goes on, what was learned
+        stays in memory for the next save (every ``SAVE_INTERVAL`` s and at shutdown). It ended the daemon (exit 74)
+        mid-drive until now, and a full disk under systemd meant a restart a minute."""
+        try:
+            self._write(json.dumps({"version": VERSION, "parameters": parameters}, indent=1, sort_keys=True))
+        except OSError as exc:
+            reason = exc.strerror or str(exc)
+            if self.failed_saves == 0 or reason != self.failure:
+                log.warning("cannot save the calibration state to %s: %s; estimating on, the learned values kept "
+                            "in memory for the next save", self.path, reason)
+            self.failed_saves += 1
+            self.failure = reason
+            return False
+        if self.failure is not None:
+            log.info("saved the calibration state to %s again", self.path)
+            self.failure = None
+        return True
+
+    def _write(self, text: str) -> None:
         self.path.parent.mkdir(parents=True, exist_ok=True)
         if self.foreign and self.path.exists():
             self._move_aside()
@@ -90,6 +111,8 @@ class CalibrationStore:
                      ", ".join(missing))
         for entry in parameters.values():
             entry["variance"] *= RELOAD_INFLATION
+        log.info("restored the calibration state from %s (%s), variances widened %gx", self.path,
+                 ", ".join(parameters), RELOAD_INFLATION)
         return parameters
 
 
