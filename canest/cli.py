@@ -48,7 +48,7 @@ EPILOG = """exit status (as BSD sysexits.h):
   69  unavailable: an optional package the feature needs (the message names it)
   73  cannot create an output file (read-only or missing folder, a folder named as file)
   74  I/O error: reading or writing failed midway (disk full, file size limit, device)
- 130  interrupted (Ctrl-C) outside a replay, or a second Ctrl-C during one
+ 130  interrupted (Ctrl-C) in a command other than run and replay, or a second Ctrl-C during a replay
 every error but 1 is one line: canest: error: FILE: what happened; what to do"""
 
 

@@ -1,6 +1,8 @@
 """The live service in-process on python-can's virtual bus: same estimates as offline replay."""
 import dataclasses
 import threading
+import subprocess
+import sys
 import time
 
 import can
@@ -286,3 +288,23 @@ def test_a_reload_on_the_same_buses_receives_the_messages_the_new_config_maps(co
                                 messages={k: v for k, v in full.messages.items() if k in first})
     service, running, _ = reload_then_play(small, full, "reloads", sim.frames[:300], "remap-in", "remap-out")
     assert running and service.config is full and service.summary()["decoded"] == 300
+
+
+def test_signals_while_the_daemon_starts_neither_kill_it_nor_are_lost():
+    """SIGHUP and SIGUSR1 end a process by default: sent while canest run read its config (1-2 s), they killed the
+    daemon (exit 129, 138); a SIGTERM then ended it without its summary. Sent here from inside the config's
+    loading, the stop is kept: the daemon opens its buses, stops at once and prints its summary."""
+    script = (
+        "import os, signal, sys\n"
+        "import canest.commands.run as command\n"
+        "load = command.config_from_args\n"
+        "def loading(args):\n"
+        "    for number in (signal.SIGHUP, signal.SIGUSR1, signal.SIGTERM):\n"
+        "        os.kill(os.getpid(), number)\n"
+        "    return load(args)\n"
+        "command.config_from_args = loading\n"
+        "from canest.cli import main\n"
+        "main(['run', '-i', 'virtual', '-c', 'startup-signals'])\n")
+    result = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=120)
+    assert result.returncode == 0, result.stderr
+    assert result.stderr.strip().splitlines()[-1].startswith("frames=0"), result.stderr

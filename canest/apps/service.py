@@ -59,6 +59,29 @@ LATENCY_WINDOW = 10_000  # send latencies kept for percentiles, cleared at every
 SHARED_CHANNEL_INTERFACES = ("socketcan", "virtual", "udp_multicast")
 
 
+class StartupSignals:
+    """The signals that reach ``canest run`` while it starts (config, DBCs, filter: 1-2 s), before :class:`Service`
+    takes them over: their default action ends the process, so a ``systemctl reload`` or ``kill -USR1`` sent then
+    killed the daemon (exit 129, 138) and a SIGTERM ended it without its summary. A stop is remembered for the
+    service (:meth:`hand_over`); a reload or a status request is moot (the config being read is the newest)."""
+
+    def __init__(self):
+        self.stop_requested = False
+        signal.signal(signal.SIGTERM, self._stop)
+        signal.signal(signal.SIGINT, self._stop)
+        signal.signal(signal.SIGHUP, signal.SIG_IGN)
+        signal.signal(signal.SIGUSR1, signal.SIG_IGN)
+
+    def _stop(self, *_args) -> None:
+        self.stop_requested = True
+
+    def hand_over(self, service: Service) -> None:
+        """``service`` takes the signals; one asked to stop already stops at once."""
+        service.install_signal_handlers()
+        if self.stop_requested:
+            service.stop()
+
+
 class Service:
     """Run the pipeline on live buses until :meth:`stop` (or SIGINT/SIGTERM) is called.
 

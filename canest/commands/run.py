@@ -14,7 +14,7 @@ from canest.errors import UsageError
 from canest.io.outputs import check_outputs
 from canest.io.sinks import CsvSink
 from canest.pipeline import format_summary
-from canest.apps.service import Service
+from canest.apps.service import Service, StartupSignals
 
 EPILOG = """examples:
   canest run --config configs/dici_ev.yaml                 # vcan0 -> vcan1 as configured
@@ -59,6 +59,7 @@ def check_bus_ids(config) -> None:
 
 
 def run(args) -> int:
+    startup = StartupSignals()
     config = config_from_args(args)
     check_bus_ids(config)
     check_outputs({"--csv": args.csv, **state_file_output(config, args)},
@@ -68,7 +69,7 @@ def run(args) -> int:
     with ExitStack() as stack:
         sinks = [stack.enter_context(CsvSink(args.csv))] if args.csv else []
         service = Service(config, sinks=sinks, reload_config=lambda: config_from_args(args))
-        service.install_signal_handlers()
+        startup.hand_over(service)
         summary = service.run()
     print(format_summary(summary), file=sys.stderr)
     return 0
