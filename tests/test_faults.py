@@ -247,6 +247,9 @@ def test_output_interface_down_drops_frames_without_blocking_and_recovers(sessio
     daemon.wait_until_read()
     assert daemon.terminate() == 0
     assert summary_value(daemon.stderr, "send_dropped") > 50
+    # said once each way, not a line a dropped frame
+    assert daemon.stderr.count("output bus vcan1 is down") == 1, daemon.stderr
+    assert daemon.stderr.count("output bus vcan1 takes frames again") == 1, daemon.stderr
     t = read_table(tmp_path / "live.csv")["t"]
     assert np.diff(t).max() < 0.03, "the loop kept ticking while the output was down"
 
@@ -362,6 +365,39 @@ def test_monitor_on_vcan1(session):
     last = out.strip().splitlines()[-1]  # not a terminal: one line per refresh
     assert " mode=normal " in last and " crc_errors=0 " in last and " yaw_rate=" in last
     assert daemon.terminate() == 0
+
+
+def test_monitor_waits_out_its_bus_going_down(session):
+    """The monitor ended with python-can's traceback (exit 1) when its interface went down; it waits as the daemon."""
+    daemon, player, capture = session()
+    assert wait_for_status(capture, normal), "the daemon never estimated normally"
+    monitor = subprocess.Popen([sys.executable, "-m", "canest", "monitor", "--channel", "vcan1", "--duration", "8"],
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    assert monitor.stdout.readline(), "the monitor printed nothing"  # its bus is open
+    ip("set", "vcan1", "down")
+    time.sleep(1.0)
+    ip("set", "vcan1", "up")
+    out, err = monitor.communicate(timeout=120)
+    assert monitor.returncode == 0 and "Traceback" not in err, err
+    assert "monitored bus vcan1 is down" in err
+    assert " mode=normal " in out.strip().splitlines()[-1]
+    assert daemon.terminate() == 0
+
+
+def test_a_player_whose_bus_goes_down_ends_with_one_line(dlc_run):
+    player = subprocess.Popen([sys.executable, "-m", "canest", "replay", str(dlc_run[0]), "--realtime",
+                               "--channel", "vcan0", "--rate", "0.5"], stdout=subprocess.PIPE,
+                              stderr=subprocess.PIPE, text=True)
+    try:
+        time.sleep(4.0)  # started and sending: the 8 s drive takes 16 s at half speed
+        assert player.poll() is None, player.communicate()
+        ip("set", "vcan0", "down")
+        _, err = player.communicate(timeout=60)
+    finally:
+        restore_vcan("vcan0")
+    assert player.returncode == 74, err
+    assert err.strip().splitlines() == [err.strip()] and "Traceback" not in err
+    assert err.startswith("canest: error: socketcan:vcan0: sending failed") and "ip link" in err
 
 
 def test_values_out_of_the_dbc_range_are_rejected_with_a_valid_crc_and_counter(session, tmp_path):

@@ -51,7 +51,9 @@ def register(subparsers) -> None:
 def run(args) -> int:
     from canest.apps.monitor import run_monitor
     from canest.codec.dbc import load_database
-    from canest.io.bus import open_bus
+    from collections import Counter
+
+    from canest.io.bus import BusLink
 
     if not MIN_REFRESH <= args.refresh <= MAX_REFRESH:  # also refuses nan
         raise UsageError(f"--refresh: seconds from {MIN_REFRESH:g} to {MAX_REFRESH:g}, got {args.refresh}")
@@ -60,7 +62,7 @@ def run(args) -> int:
     config = config_from_args(args)
     bus_config = config.output_bus
     database = load_database(config.output_dbc, "monitor")
-    bus = open_bus(bus_config.kwargs(), "monitored")
+    bus = BusLink(bus_config.kwargs(), "monitored", Counter())  # a bus down or gone is waited for, as by the daemon
     line_mode = args.lines or not sys.stdout.isatty()
     duration = 5.0 if args.once and args.duration is None else args.duration
     try:
@@ -69,7 +71,7 @@ def run(args) -> int:
     except KeyboardInterrupt:
         return 0
     finally:
-        bus.shutdown()
+        bus.close()
     if args.once and not monitor.complete():
         raise NoEstimates(f"{bus_config.interface}:{bus_config.channel}: no estimate frames within {duration:g} s; "
                           "is the daemon running and sending on this bus?")

@@ -8,8 +8,10 @@ import signal
 import sys
 from contextlib import contextmanager
 
+import can
+
 from canest.config import DEFAULT_CONFIG
-from canest.errors import LogError, UsageError
+from canest.errors import FileIOError, LogError, UsageError
 from canest.io.bus import open_bus
 from canest.io.outputs import check_outputs, is_stdio
 from canest.commands.common import (FORMATTER, add_bus_overrides, add_config, add_log_reading, add_state_file,
@@ -158,6 +160,9 @@ def run(args) -> int:
         bus = open_bus(config.input_bus.kwargs(), "playback")
         try:
             sent = play(args.log, bus, speed=rate, progress=not args.quiet, **log_reading(args))
+        except can.CanError as exc:  # the interface went down or away under the player
+            raise FileIOError(f"{config.input_bus.interface}:{config.input_bus.channel}: sending failed: {exc}; "
+                              "check the interface (ip link) and play the log again") from None
         finally:
             bus.shutdown()
         print(f"sent {sent} frames to {config.input_bus.interface}:{config.input_bus.channel}")

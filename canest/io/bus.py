@@ -140,6 +140,7 @@ class BusLink:
         self.backoff = BACKOFF_START
         self.next_attempt = 0.0
         self.dropped_by_closed = 0  # kernel drops of the sockets closed before this one
+        self.refusing = False  # its sends fail on an interface that is down (:meth:`send` warned)
 
     def kernel_dropped(self) -> int:
         """Frames the kernel dropped on this link's sockets since it was created (receive queue full)."""
@@ -216,11 +217,18 @@ class BusLink:
         try:
             self.frames.send(msg)
             self.backoff = BACKOFF_START
-            return True
         except (can.CanError, OSError) as exc:
             if _error_code(exc) in GONE:
                 self._lost(exc)
+            elif _error_code(exc) == errno.ENETDOWN and not self.refusing:  # once, not a line a frame
+                log.warning("%s bus %s is down: %s; its frames are dropped (counted) until it is up", self.role,
+                            self.kwargs.get("channel"), exc)
+                self.refusing = True
             return False  # anything else (queue full, interface down): this frame is dropped
+        if self.refusing:
+            log.warning("%s bus %s takes frames again", self.role, self.kwargs.get("channel"))
+            self.refusing = False
+        return True
 
     def close(self) -> None:
         if self.bus is not None:
