@@ -266,3 +266,24 @@ def test_monitor_without_calibration_frames_shows_the_estimates_and_waits_one_cy
     assert "calib_" not in monitor.line() and "learned" not in monitor.render("t")
     monitor.completed_at -= CALIBRATION_WAIT
     assert monitor.settled()
+
+
+def test_the_monitor_says_when_the_estimates_stopped_and_shows_no_stale_value_as_valid(estimates, monkeypatch):
+    """A stopped daemon's last values stayed on screen flagged valid, and the frame rate was the mean since start."""
+    from canest.apps import monitor as monitor_module
+
+    clock = [100.0]
+    monkeypatch.setattr(monitor_module.time, "monotonic", lambda: clock[0])
+    frames, _ = last_second_frames(estimates)
+    monitor = Monitor(cantools.database.load_file(str(REFERENCE)))
+    for frame in frames:
+        monitor.receive(frame)
+    clock[0] += 0.5
+    fresh_line, fresh_view = monitor.line(), monitor.render("t")
+    assert " age=0.5 " in fresh_line and " vx=" in fresh_line and "no estimate frames" not in fresh_view
+    vx_valid = next(line for line in fresh_view.splitlines() if line.startswith("vx ")).split()[-1]
+    clock[0] += monitor_module.STALE_AFTER
+    line, view = monitor.line(), monitor.render("t")
+    assert all(word.endswith("?") for word in line.split() if word.startswith(("vx=", "yaw_rate=", "sideslip=")))
+    assert f"no estimate frames for {0.5 + monitor_module.STALE_AFTER:.1f} s" in view and "(0/s)" in view
+    assert vx_valid == "yes" and next(row for row in view.splitlines() if row.startswith("vx ")).endswith("stale")

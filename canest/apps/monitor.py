@@ -31,6 +31,7 @@ ROWS = [
     *[(f"mu {w}", "CE_Friction", f"Mu{w.upper()}", "", 1.0) for w in ("fl", "fr", "rl", "rr")],
 ]
 CALIBRATION_WAIT = 1.2  # s: once the estimates are complete, how long --once waits for the 1 Hz calibration
+STALE_AFTER = 1.0  # s without an estimate frame after which the values shown are a stopped daemon's last ones
 DEG = 180 / math.pi
 # learned parameter: (display unit, factor from SI); speed, ratio, front and rear are factors on the configured values
 CALIBRATION_UNITS = {"speed": ("x", 1.0), "gyro_bias": ("deg/s", DEG), "ay_bias": ("m/s^2", 1.0),
@@ -62,6 +63,18 @@ class Monitor:
         self.counts = Counter()
         self.counters = {}
         self.started = time.monotonic()
+        self.last_frame = None  # time.monotonic() of the last estimate frame
+        self.rate_since = (self.started, 0)  # (time, frames) of the last render: its frame rate is since then
+
+    def age(self) -> float | None:
+        """Seconds since the last estimate frame (None before the first)."""
+        return None if self.last_frame is None else time.monotonic() - self.last_frame
+
+    def stale(self) -> bool:
+        """Frames came, then stopped for ``STALE_AFTER`` s: what is shown is no longer the car's (a daemon stopped
+        or its bus down kept its last values on screen, flagged valid, for as long as the monitor ran)."""
+        age = self.age()
+        return age is not None and age > STALE_AFTER
 
     def receive(self, msg: can.Message) -> None:
         message = self.messages.get(msg.arbitration_id)
@@ -69,6 +82,7 @@ class Monitor:
             self.counts["foreign"] += 1
             return
         self.counts["frames"] += 1
+        self.last_frame = time.monotonic()
         counter_name, modulus, crc_index = self.integrity[msg.arbitration_id]
         if not integrity.checksum_ok(msg.arbitration_id, msg.data, crc_index):
             self.counts["crc_errors"] += 1
@@ -109,25 +123,33 @@ class Monitor:
 
     def line(self) -> str:
         """The view as one line of ``key=value`` words, for a pipe or a log; an invalid state's value ends in ?."""
+        age = self.age()
         words = [f"t={time.time():.3f}", f"frames={self.counts['frames']}", f"crc_errors={self.counts['crc_errors']}",
-                 f"counter_gaps={self.counts['counter_gaps']}"]
+                 f"counter_gaps={self.counts['counter_gaps']}", *([f"age={age:.1f}"] if age is not None else [])]
+        stale = self.stale()
         status = self.latest.get(STATUS_MESSAGE)
         if status is not None:
             words += [f"mode={status['Mode']}", f"resets={status['ResetCount']}"]
         for label, message, stem, unit, factor in ROWS:
             values = self.latest.get(message)
             if values is not None:
-                mark = "" if values[f"{stem}Valid"] else "?"
+                mark = "" if values[f"{stem}Valid"] and not stale else "?"
                 words.append(f"{label.replace(' ', '_')}={values[stem] * factor:.4g}{mark}")
         for name, value, std, _, state in self.calibration_rows():
             words += [f"calib_{name}={value:.6g}", f"calib_{name}_std={std:.3g}", f"calib_{name}_state={state}"]
         return " ".join(words)
 
     def render(self, title: str) -> str:
-        elapsed = max(time.monotonic() - self.started, 1e-9)
-        c = self.counts
-        lines = [f"canest monitor  {title}  frames {c['frames']} ({c['frames'] / elapsed:.0f}/s)  "
+        now, c = time.monotonic(), self.counts
+        since, frames_then = self.rate_since
+        rate = (c["frames"] - frames_then) / max(now - since, 1e-9)  # since the last view: frames stopping show
+        self.rate_since = (now, c["frames"])
+        lines = [f"canest monitor  {title}  frames {c['frames']} ({rate:.0f}/s)  "
                  f"CRC errors {c['crc_errors']}  counter gaps {c['counter_gaps']}"]
+        stale = self.stale()
+        if stale:
+            lines.append(f"no estimate frames for {self.age():.1f} s: the values below are the last received; "
+                         "is the daemon running and its bus up?")
         status = self.latest.get(STATUS_MESSAGE)
         if status is None:
             lines.append("no status message yet")
@@ -140,7 +162,7 @@ class Monitor:
             values = self.latest.get(message)
             if values is None:
                 continue
-            valid = "yes" if values[f"{stem}Valid"] else "no"
+            valid = "stale" if stale else "yes" if values[f"{stem}Valid"] else "no"
             lines.append(f"{label:<10} {values[stem] * factor:>9.3f} {unit:<5}{values[stem + 'Std'] * factor:>8.3f}"
                          f"  {valid}")
         rows = list(self.calibration_rows())
