@@ -133,6 +133,7 @@ def test_input_interface_down_up_and_deleted_then_back(session):
     assert summary_value(daemon.stderr, "input_bus_lost") >= 1  # deleted: a new socket is needed
     assert summary_value(daemon.stderr, "input_bus_reconnects") >= 1
     assert "is down" in daemon.stderr and "reopened" in daemon.stderr
+    assert "input bus vcan0 delivers frames again" in daemon.stderr  # the way back from "down" is said too
 
 
 def test_one_input_message_stops_and_recovers(session):
@@ -379,7 +380,7 @@ def test_monitor_waits_out_its_bus_going_down(session):
     ip("set", "vcan1", "up")
     out, err = monitor.communicate(timeout=120)
     assert monitor.returncode == 0 and "Traceback" not in err, err
-    assert "monitored bus vcan1 is down" in err
+    assert "monitored bus vcan1 is down" in err and "monitored bus vcan1 delivers frames again" in err
     assert " mode=normal " in out.strip().splitlines()[-1]
     assert daemon.terminate() == 0
 

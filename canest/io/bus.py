@@ -141,6 +141,9 @@ class BusLink:
         self.next_attempt = 0.0
         self.dropped_by_closed = 0  # kernel drops of the sockets closed before this one
         self.refusing = False  # its sends fail on an interface that is down (:meth:`send` warned)
+        # when it reported its interface down, until a frame received after that came (the frames queued before
+        # it are read after the report: :meth:`recv`)
+        self.down_at = None
 
     def kernel_dropped(self) -> int:
         """Frames the kernel dropped on this link's sockets since it was created (receive queue full)."""
@@ -193,6 +196,7 @@ class BusLink:
                     return None
                 log.warning("%s bus %s is down: %s", self.role, self.kwargs.get("channel"), exc)
                 self.counts[f"{self.role}_bus_down"] += 1
+                self.down_at = time.time()
                 # SocketCAN reports a downed interface once, ahead of the frames still queued: read on. An
                 # interface that reports it at every call would spin: the second error waits out the timeout.
                 if attempt:
@@ -200,6 +204,9 @@ class BusLink:
                 continue
             if msg is not None:
                 self.backoff = BACKOFF_START  # a frame arrived: the link is really back
+                if self.down_at is not None and (msg.timestamp > self.down_at or not self.stamps_at_receive):
+                    log.warning("%s bus %s delivers frames again", self.role, self.kwargs.get("channel"))
+                    self.down_at = None
             return msg
         return None
 
