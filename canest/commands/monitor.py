@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import math
 import sys
+from collections import Counter
 
 from canest.commands.common import FORMATTER, add_bus_overrides, add_config, config_from_args
 from canest.errors import BusOpenError, UsageError
@@ -51,8 +52,6 @@ def register(subparsers) -> None:
 def run(args) -> int:
     from canest.apps.monitor import run_monitor
     from canest.codec.dbc import load_database
-    from collections import Counter
-
     from canest.io.bus import BusLink
 
     if not MIN_REFRESH <= args.refresh <= MAX_REFRESH:  # also refuses nan

@@ -51,7 +51,7 @@ class CalibrationStore:
             self._write(json.dumps({"version": VERSION, "parameters": parameters}, indent=1, sort_keys=True))
         except OSError as exc:
             reason = exc.strerror or str(exc)
-            if self.failed_saves == 0 or reason != self.failure:
+            if reason != self.failure:  # None while saves succeed: the first failure is said too
                 log.warning("cannot save the calibration state to %s: %s; estimating on, the learned values kept "
                             "in memory for the next save", self.path, reason)
             self.failed_saves += 1
