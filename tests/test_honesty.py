@@ -310,6 +310,17 @@ def test_the_sideslip_is_initializing_until_ay_s_noise_is_measured(tmp_path):
     assert valid.any()  # and later judged, and valid
 
 
+def test_a_slide_on_two_vibrating_accelerometers_is_checked_on_their_mean(tmp_path):
+    """Two IMUs on one body read one ay; a vibrating ay (1.4 m/s^2) left the kinematic check a noise gate of 0.82
+    of its 1.26 deg tolerance, and in this lane change's slide onset on 0.35 dici-gfckf's sideslip was 1.3-1.9 deg
+    off with a std of 0.36, flagged valid. The check takes both accelerometers' mean where it is quieter than ay,
+    its noise read from its own samples: the slide is seen, and the sideslip is never valid and wrong."""
+    table, truth = replayed(honesty.Case("dlc", 80.0, 0.35, 0, vibration=1.0, car="drawn"), "dici-gfckf", tmp_path)
+    every_tick = counts(table, truth, "beta", only_valid=False, skip=honesty.SKIP)
+    flagged = counts(table, truth, "beta", skip=honesty.SKIP)
+    assert every_tick["max"] > 1.3 and flagged["wrong"] == 0, flagged  # deg: the drive has the error
+
+
 def test_a_vibrating_ay_does_not_move_force_between_an_axle_s_wheels(tmp_path):
     """The wheel loads took each vibrating ay sample: on this drive the rear left force fell from 1 612 to 826 N in
     30 ms (the rear right rose by as much; no measurement row sees an axle's split), 4 std off, flagged valid. The

@@ -150,14 +150,15 @@ class StateJudge:
         return validity.sideslip_offset_std(self.vehicle, unadmitted)
 
     def drift(self, inputs, vx: float, beta: float, beta_std: float, vx_measured: bool,
-              ay_density: float = 0.0) -> float:
+              ay_density: float = 0.0, kinematic_ay: float | None = None) -> float:
         """This tick's bound on vx's drift from an unmodelled lateral velocity (0 without ay or a gyro);
         ``beta_std``: the sideslip's std, the filter's with the model's error; ``vx_measured``: the wheels
-        measured vx this tick; ``ay_density``: ay's noise density where it is louder than configured."""
+        measured vx this tick; ``ay_density``: the noise density of the ay the kinematic identity takes
+        (``kinematic_ay``, None: the input's) where it is louder than configured."""
         if not inputs.has("ay", "yaw_rate"):
             self.lateral_drift.reset()
             return 0.0
-        ay, yaw_rate = self._kinematic_inputs(inputs)
+        ay, yaw_rate = self._kinematic_inputs(inputs, kinematic_ay)
         return self.lateral_drift.update(ay, yaw_rate, vx, beta, vx_measured, self.sideslip_known,
                                          lateral_velocity_of(vx, beta, beta_std), ay_density)
 
@@ -187,10 +188,12 @@ class StateJudge:
         self.correction_std = tuple(claimed if applied is None else applied
                                     for applied, claimed in zip((speed, gyro_bias), self.claimed_std))
 
-    def _kinematic_inputs(self, inputs) -> tuple:
-        """ay and yaw rate as the kinematic identity holds them: the inputs less :meth:`use_kinematic_offsets`'."""
+    def _kinematic_inputs(self, inputs, ay: float | None = None) -> tuple:
+        """ay and yaw rate as the kinematic identity holds them: the inputs less :meth:`use_kinematic_offsets`';
+        ``ay``: the lateral acceleration to take instead of the input's (both accelerometers',
+        :meth:`canest.estimation.core.Estimator._kinematic_ay`)."""
         ay_offset, yaw_offset = self.kinematic_offsets
-        return inputs.values["ay"] - ay_offset, inputs.values["yaw_rate"] - yaw_offset
+        return (inputs.values["ay"] if ay is None else ay) - ay_offset, inputs.values["yaw_rate"] - yaw_offset
 
     def widen(self, std: np.ndarray, index: dict, ratios: dict, beta_model_std: float,
               lateral: float = 0.0, gyro_noise: float = 1.0, walk: float = 0.0, walk_apart: bool = False,
@@ -253,7 +256,8 @@ class StateJudge:
 
     def _lateral_cause(self, inputs, ratio: float, low_speed: bool, after_reset: bool, zero_learned: bool,
                        ay_noise_known: bool, lateral_ok: bool, beta: float, vx: float, delta: float, ay_density: float,
-                       at_limit_of_unbounded_friction: bool, frictions_pressed: bool) -> str:
+                       at_limit_of_unbounded_friction: bool, frictions_pressed: bool,
+                       kinematic_ay: float | None = None) -> str:
         """Why sideslip (and the lateral forces) are not valid, or "valid" (a steering zero still being learned, or
         an ay whose noise its samples do not show yet, ``ay_noise_known`` false: "initializing"; the filter took it
         at its configured noise, and on a vibrating IMU the 3-DOF filters' sideslip had a NEES of 3.1 over the
@@ -276,7 +280,8 @@ class StateJudge:
         if cause != "valid":
             self.kinematic.reset()
             return cause
-        moving_as_measured = self.kinematic.inside(beta, *self._kinematic_inputs(inputs), vx, ay_density)
+        moving_as_measured = self.kinematic.inside(beta, *self._kinematic_inputs(inputs, kinematic_ay), vx,
+                                                  ay_density)
         in_regime = self.regime is None or self.regime.inside(delta, vx, inputs.values["yaw_rate"])
         in_regime = in_regime and not at_limit_of_unbounded_friction
         if not (moving_as_measured and in_regime and self.lateral_drift.allows_return(vx)):
