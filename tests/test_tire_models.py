@@ -3,7 +3,8 @@ import numpy as np
 import pytest
 
 from canest.models import tire_force, two_track
-from canest.models.tire import TireModelParams, cornering_stiffness, magic_formula, magic_formula_slope
+from canest.models.tire import (TireModelParams, cornering_stiffness, left_shares, magic_formula, magic_formula_slope,
+                                peak_input, slip_for_force)
 from canest.models.tire_force import AxDrivenTireForceModel, TireForceModel
 from canest.models.two_track import TwoTrackModel
 from canest.models.wheel_force import WheelAcceleration, longitudinal_forces
@@ -29,6 +30,27 @@ def test_friction_lowers_the_peak_not_the_stiffness():
 def test_degressive_cornering_stiffness_equals_the_configured_one_at_static_load():
     assert cornering_stiffness(50000.0, 4000.0, 4000.0, 2.0) == pytest.approx(50000.0)
     assert cornering_stiffness(50000.0, 8000.0, 4000.0, 2.0) < 2 * 50000.0  # less than proportional
+
+
+def test_the_slip_for_a_force_inverts_the_magic_formula_up_to_its_peak():
+    stiffness, shape, curvature, peak = 50000.0, 1.3, -0.3, 4000.0
+    peak_x = peak_input(shape, curvature)
+    peak_slip = peak_x * shape * peak / stiffness
+    slips = np.linspace(0.0, 0.98 * peak_slip, 25)
+    forces = magic_formula(slips, stiffness, shape, curvature, peak)
+    np.testing.assert_allclose(slip_for_force(-forces, stiffness, shape, curvature, peak, peak_x), slips,
+                               atol=1e-6)  # either side's force
+    assert magic_formula(peak_slip, stiffness, shape, curvature, peak) == pytest.approx(peak)
+    assert slip_for_force(1.5 * peak, stiffness, shape, curvature, peak, peak_x) == pytest.approx(peak_slip)
+
+
+def test_an_axle_s_split_leans_on_the_loaded_wheel_the_more_the_stiffer_its_load_makes_it():
+    static = np.full(4, 4000.0)
+    assert left_shares(static, static, 2.0) == pytest.approx([0.5, 0.5])  # straight: equal loads
+    turning = np.array([2000.0, 6000.0, 2500.0, 5500.0])  # a right turn unloads the left wheels
+    shares = left_shares(turning, static, np.array([[1.0], [2.0], [1e3]]))
+    assert np.all(np.diff(shares, axis=0) < 0) and np.all(shares < 0.5)  # more proportional, less on the left
+    np.testing.assert_allclose(shares[-1], [0.25, 2500.0 / 8000.0], rtol=1e-3)  # q large: its load's share
 
 
 def test_loads_sum_to_weight_and_a_left_turn_unloads_the_left_wheels(config):

@@ -32,6 +32,8 @@ needs the sign above (tests/test_tire_models.py integrates it).
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from canest.params import TireModelParams  # noqa: F401  (re-exported: the tire model's parameters)
@@ -45,11 +47,43 @@ def cornering_stiffness(static_stiffness, fz, static_load, load_sensitivity: flo
     return static_stiffness * shape / np.sin(2.0 * np.arctan(1.0 / load_sensitivity))
 
 
+def left_shares(loads, static_load, load_sensitivity):
+    """Each axle's share of its lateral force on its left wheel in the linear range, ``K_l / (K_l + K_r)`` of
+    :func:`cornering_stiffness` (both wheels of an axle turn at one slip angle there); shape ``(..., 2)``
+    (front, rear) for ``loads`` ``(4,)`` and ``load_sensitivity`` a scalar or an array ``(..., 1)``."""
+    stiffness = cornering_stiffness(1.0, loads, static_load, load_sensitivity)
+    left, right = stiffness[..., 0::2], stiffness[..., 1::2]
+    return left / np.maximum(left + right, MIN_PEAK)
+
+
 def magic_formula(slip, stiffness, shape: float, curvature: float, peak):
     """Pacejka's Magic Formula with ``B = stiffness / (shape * peak)``; vectorized."""
     peak = np.maximum(peak, MIN_PEAK)
     bs = stiffness / (shape * peak) * slip
     return peak * np.sin(shape * np.arctan(bs - curvature * (bs - np.arctan(bs))))
+
+
+def peak_input(shape: float, curvature: float) -> float:
+    """``B s`` at :func:`magic_formula`'s peak, where ``shape atan(x - E (x - atan x)) = pi / 2``; by bisection."""
+    target, low, high = math.tan(0.5 * math.pi / shape), 0.0, 100.0
+    for _ in range(60):
+        x = 0.5 * (low + high)
+        low, high = (x, high) if x - curvature * (x - math.atan(x)) < target else (low, x)
+    return 0.5 * (low + high)
+
+
+def slip_for_force(force, stiffness, shape: float, curvature: float, peak, peak_x: float):
+    """The slip (>= 0) at which :func:`magic_formula` carries ``|force|``, the peak's slip where the force is
+    beyond the peak; ``peak_x``: :func:`peak_input` of the curve; vectorized over broadcast arrays, by bisection on
+    ``B s`` (the curve rises monotonically up to its peak)."""
+    peak = np.maximum(peak, MIN_PEAK)
+    share = np.minimum(np.abs(force) / peak, 1.0)
+    low, high = np.zeros_like(share), np.full_like(share, peak_x)
+    for _ in range(30):
+        x = 0.5 * (low + high)
+        below = np.sin(shape * np.arctan(x - curvature * (x - np.arctan(x)))) < share
+        low, high = np.where(below, x, low), np.where(below, high, x)
+    return 0.5 * (low + high) * shape * peak / np.maximum(stiffness, MIN_PEAK)
 
 
 def magic_formula_slope(slip, stiffness, shape: float, curvature: float, peak):
