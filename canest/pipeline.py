@@ -5,7 +5,9 @@ estimates of every tick that completed before the frame (a tick at time T
 uses every frame stamped <= T). A live source with an idle bus calls
 :meth:`Pipeline.advance` so ticks still happen and stale inputs are noticed;
 a frame stamped at or before a tick that already ran that way is used in the
-next tick and counted ``late_frames`` (replay never has one).
+next tick and counted ``late_frames`` (replay never has one). Before the
+first frame, ``advance`` ticks on the source's clock, every tick ``no_input``
+(a silent bus), and the first frame anchors the frames' grid as in replay.
 Where frames come from and where estimates go is the caller's business.
 """
 from __future__ import annotations
@@ -34,6 +36,7 @@ class Pipeline:
         self.calibration = make_calibration(config, self.resampler.names)  # corrects each sample before a step
         self.encoder = EstimateEncoder(config.output_dbc, output_channel)
         self.clock = TickClock(1.0 / config.estimator.rate_hz)
+        self.idle_clock = TickClock(self.clock.dt)  # the ticks before the first frame: :meth:`advance`
         self.counts = Counter()
         self.last_time = None
         self.last_tick = None  # the latest tick estimated
@@ -53,8 +56,11 @@ class Pipeline:
         return estimates
 
     def _step(self, tick: float):
-        """One tick's estimate, carrying the online calibration's report when the learner runs."""
-        sample = self.calibration.correct(self.leveling.level(self.resampler.sample(tick)))
+        """One tick's estimate on the inputs held at ``tick``, levelled and corrected (the learner takes them)."""
+        return self._estimate(self.calibration.correct(self.leveling.level(self.resampler.sample(tick))))
+
+    def _estimate(self, sample):
+        """The estimator's step on ``sample``, carrying the online calibration's report when the learner runs."""
         if self.calibration.enabled:
             self.estimator.use_stiffness(*self.calibration.stiffness, self.calibration.stiffness_error)
             self.estimator.use_kinematic_offsets(*self.calibration.kinematic_offsets)
@@ -91,8 +97,23 @@ class Pipeline:
             self.resampler.set_timeout(name, seconds)
 
     def advance(self, t: float) -> list:
-        """Ticks strictly before ``t`` with no new frame (idle bus)."""
-        return self._ticks(t) if self.clock.t0 is not None else []
+        """Ticks strictly before ``t`` with no new frame (idle bus).
+
+        Before the first frame (a silent bus: the vehicle off, a cable not yet connected) they lie on a grid of
+        their own, anchored at the first ``t`` (the live source's clock), and each says ``no_input``, so a daemon
+        waiting for its car is seen running. They touch neither the frames' grid nor the learner: the first frame
+        anchors that grid at its own timestamp, as in replay, whatever the base of the source's clock (an
+        adapter's stamps need not be on it), so the idle phase is no time jump, no step back and makes no frame
+        late, and the ticks from there are replay's."""
+        if self.clock.t0 is None:
+            return [self._estimate(self.resampler.sample(tick)) for tick in self.idle_clock.due(t)]
+        return self._ticks(t)
+
+    @property
+    def next_tick(self) -> float:
+        """When the next tick falls due: on the frames' grid, before the first frame on the idle one (inf until
+        :meth:`advance` anchored it)."""
+        return (self.idle_clock if self.clock.t0 is None else self.clock).next_tick
 
     def close(self) -> None:
         """At shutdown: the online calibration saves its state."""

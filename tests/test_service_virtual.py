@@ -1,5 +1,6 @@
 """The live service in-process on python-can's virtual bus: same estimates as offline replay."""
 import dataclasses
+import io
 import threading
 import subprocess
 import sys
@@ -131,6 +132,81 @@ def test_idle_bus_keeps_ticking_and_reports_missing_inputs(config, dlc_run):
     assert not any(live[-1].valid.values())
 
 
+class RecordingNotifier:
+    """The sd_notify messages a service sends, kept in order (no systemd socket needed)."""
+
+    watchdog_interval = None
+
+    def __init__(self):
+        self.sent = []
+
+    def notify(self, **fields) -> None:
+        self.sent.append(fields)
+
+
+def test_a_silent_input_bus_says_no_input_from_the_start_then_ticks_on_the_frames_grid(config, dlc_run, monkeypatch):
+    """Vehicle off, cable not yet connected: the daemon published nothing before the first input frame (its ticks
+    were anchored there), so ``canest monitor --once`` said it was not running, and a consumer could not tell a dead
+    daemon from a parked car. From the start it ticks on its clock at the estimator's rate, every tick ``no_input``,
+    and says so on the output bus and in systemd's STATUS. Then frames come on another time base than that clock
+    (the log's, as an adapter's own clock would be): the frames' grid is anchored on the first of them as replay's
+    is, with no time jump, step back, late frame or reset, and every tick from there is replay's."""
+    from canest.apps.monitor import run_monitor
+    from canest.codec.dbc import load_database
+
+    monkeypatch.setattr(service_module, "NOTIFY_STATUS_EVERY", 0.1)
+    log, _, _ = dlc_run
+    offline = []
+    replay(config, log, progress=False, on_estimate=offline.append)
+    frames = list(can.LogReader(log))
+    frames = [f for f in frames if f.timestamp < frames[0].timestamp + 2.0]
+    reached = [None]  # the log time of the newest frame sent, once the player starts; the wall clock before
+    live_config = config.with_buses(BusConfig("virtual", "silent-in"), BusConfig("virtual", "silent-out"))
+    live, notifier = [], RecordingNotifier()
+    service = Service(live_config, sinks=[CallbackSink(live.append)], notifier=notifier,
+                      clock=lambda: time.time() if reached[0] is None else reached[0])
+    watcher = can.Bus(interface="virtual", channel="silent-out")
+    player_bus = can.Bus(interface="virtual", channel="silent-in", preserve_timestamps=True)
+    view, silent = io.StringIO(), {}
+
+    def play():
+        started = time.monotonic()
+        silent["monitor"] = run_monitor(watcher, load_database(config.output_dbc, "test"), "virtual:silent-out",
+                                        view, once=True, duration=3.0)
+        time.sleep(max(0.0, 1.0 - (time.monotonic() - started)))
+        silent["seconds"], silent["ticks"] = time.monotonic() - started, list(live)
+        silent["notified"] = list(notifier.sent)
+        for frame in paced(frames):
+            reached[0] = frame.timestamp
+            player_bus.send(frame)
+        time.sleep(0.2)
+
+    summary = run_service_playing(service, play)
+    watcher.shutdown()
+    player_bus.shutdown()
+    assert silent["monitor"].complete(), "no estimate frames on a silent input bus"
+    assert " mode no_input " in view.getvalue()
+    idle, dt = silent["ticks"], 1.0 / config.estimator.rate_hz
+    assert len(idle) > 0.5 * silent["seconds"] / dt, f"{len(idle)} ticks in {silent['seconds']:.2f} s"
+    assert np.allclose(np.diff([e.t for e in idle]), dt, rtol=0, atol=1e-6), "one tick per period"
+    assert {e.mode for e in idle} == {"no_input"} and not any(e.valid_flags for e in idle)
+    assert all(set(e.causes.values()) == {"no_input"} and np.isnan(e.values["vx"]) for e in idle)
+    status = [fields["STATUS"] for fields in silent["notified"] if "STATUS" in fields][-1]
+    assert status.startswith("mode no_input, input 0 frames/s, ") and float(status.split()[-2]) > 0.5 / dt
+    assert not any("READY" in fields for fields in silent["notified"]), "ready only once an estimate is valid"
+    assert summary["decoded"] == len(frames) and summary["resets"] == 0
+    assert not {"time_jumps", "time_backwards", "late_frames"} & set(summary), summary
+    first = next(i for i, e in enumerate(live) if e.t == offline[0].t)
+    assert {e.mode for e in live[:first]} == {"no_input"}
+    real = live[first:]
+    assert len(real) >= 2.0 / dt - 2
+    assert [e.t for e in real] == [e.t for e in offline[:len(real)]]
+    for state in ("yaw_rate", "beta", "vx", "vx_std"):
+        np.testing.assert_array_equal([e.values[state] for e in real], [e.values[state] for e in offline[:len(real)]])
+    assert [e.valid_flags for e in real] == [e.valid_flags for e in offline[:len(real)]]
+    assert sum("READY" in fields for fields in notifier.sent) == 1
+
+
 def test_time_jump_and_backwards_timestamps_are_counted_not_stepped(config, dlc_run):
     from canest.pipeline import Pipeline
 
@@ -175,8 +251,6 @@ def test_frame_read_after_its_tick_ran_on_an_idle_bus_is_counted_late(config, dl
 
 
 def test_monitor_shows_estimates_and_health_of_a_running_service(config, dlc_run):
-    import io
-
     from canest.codec.dbc import load_database
     from canest.apps.monitor import run_monitor
 

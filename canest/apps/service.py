@@ -8,7 +8,10 @@ that long, every frame stamped before the tick has been read, so the tick runs
 at once instead of waiting for a later frame. This bounds the input-to-output
 latency to about ``TICK_MARGIN`` plus the processing time, keeps ticking on an
 idle bus (stale inputs lose their validity bits), and leaves the estimates
-identical to replay's.
+identical to replay's. Before the first frame (the vehicle off, a cable not yet
+connected) it ticks on ``clock`` and publishes every tick as ``no_input``, so
+the output bus shows a running daemon waiting for its car; the first frame
+anchors the grid of the frames' own time base (:meth:`Pipeline.advance`).
 
 What the loop guarantees:
 
@@ -89,8 +92,9 @@ class Service:
     or a callback) and the newest of each pass to the output bus.
     ``reload_config`` (no arguments, returns a Config) is called on SIGHUP.
     ``clock`` is the time base of the input frames' timestamps, read when the bus is idle: ``time.time`` for
-    SocketCAN's and python-can's receive stamps. :meth:`wait_until_listening` tells a thread that plays frames
-    in when to start: a bus gives a frame only to the receivers open when it is sent.
+    SocketCAN's and python-can's receive stamps; before the first frame it alone times the ``no_input`` ticks.
+    :meth:`wait_until_listening` tells a thread that plays frames in when to start: a bus gives a frame only to
+    the receivers open when it is sent.
     """
 
     def __init__(self, config: Config, sinks=(), reload_config=None, notifier=None, clock=time.time):
@@ -235,7 +239,7 @@ class Service:
         While frames queue up a stale ``now`` costs nothing (the socket is not empty); when the bus falls
         silent the first wait is at most one period."""
         period = 1.0 / self.config.estimator.rate_hz
-        due = self.pipeline.clock.next_tick + TICK_MARGIN - now
+        due = self.pipeline.next_tick + TICK_MARGIN - now
         return min(max(due, 0.0), period)
 
     def _housekeeping(self, schedule: "_Schedule") -> None:
