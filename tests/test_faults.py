@@ -38,6 +38,8 @@ OUTPUT_IDS = {m.frame_id for m in DB.messages}
 IMU_BIT, IMU_2_BIT = (1 << list(INPUT_GROUPS).index(group) for group in ("imu", "imu_2"))
 BETA_VALID, YAW_VALID = 1 << 2, 1 << 3
 CAUSES = DB.get_message_by_name("CE_ValidityCause")
+NO_INPUT = next(value for value, name in STATUS.get_signal_by_name("Mode").choices.items() if str(name) == "no_input")
+ALL_MISSING = (1 << len(INPUT_GROUPS)) - 1
 QUEUE_BYTES = 4 * 1024 * 1024  # ~5000 frames, 9 s of the drive: a starved guest's daemon falls behind, not drops
 
 
@@ -103,6 +105,45 @@ def session(dlc_run, tmp_path):
         parts["daemon"].terminate()
     if "capture" in parts:
         parts["capture"].stop()
+
+
+def test_a_silent_input_bus_is_said_from_the_start_and_frames_then_tick_on_their_own_grid(dlc_run, tmp_path):
+    """Vehicle off: no frame on vcan0. The daemon published nothing before the first input frame and ``canest
+    monitor --once`` exited 69 ("is the daemon running"). It sends its status from the start, mode ``no_input``
+    with every input missing, on the wall clock; when frames come, stamped by the kernel, it estimates normally
+    with no time jump, step back, late frame or reset, and its CSV's ticks go on without a gap or a step."""
+    with receive_queues(QUEUE_BYTES):
+        capture = Capture(ids=(STATUS.frame_id,))
+        daemon = Daemon(tmp_path / "live.csv")
+    listening = time.time()  # "estimating:" was logged: the buses are open
+    player = Player(dlc_run[2].frames, loops=1)
+    try:
+        first = wait_for_status(capture, lambda s: s["Mode"] == NO_INPUT and s["MissingInputs"] == ALL_MISSING,
+                                run=20)
+        assert first and first - listening < 1.0, "no status on a silent bus"
+        monitor = subprocess.run([sys.executable, "-m", "canest", "monitor", "--channel", "vcan1", "--once"],
+                                 capture_output=True, text=True, timeout=60)
+        assert monitor.returncode == 0 and " mode=no_input " in monitor.stdout, monitor.stderr
+        silent = statuses(capture.frames, until=time.time())
+        assert len(silent) > 100 and all(s["Mode"] == NO_INPUT and not s["ValidFlags"] for s in silent)
+        player.start()
+        assert wait_for_status(capture, normal, since=time.time(), run=20), "the daemon never estimated normally"
+        player.done.wait(60)
+        daemon.wait_until_read()
+        assert daemon.terminate() == 0
+    finally:
+        if player.is_alive():
+            player.stop()
+        daemon.terminate()
+        capture.stop()
+    for counter in ("time_jumps", "time_backwards", "late_frames", "resets"):
+        assert summary_value(daemon.stderr, counter) == 0, daemon.stderr
+    table = read_table(tmp_path / "live.csv")
+    first_frame_tick = np.flatnonzero(table["mode"] != "no_input")[0]
+    assert first_frame_tick > 100, "a second of no_input ticks before the frames"
+    steps = np.diff(table["t"])
+    assert np.all(np.abs(steps - 0.01)[:first_frame_tick - 1] < 1e-5), "the idle ticks, one per 10 ms"
+    assert np.all(np.abs(steps) < 0.05), f"a gap or a step at row {np.argmax(np.abs(steps))} of {len(steps)}"
 
 
 def test_input_interface_down_up_and_deleted_then_back(session):
