@@ -28,6 +28,9 @@ process). In three terminals:
   canest monitor -i udp_multicast -c 239.74.163.3
   canest replay drive.log --realtime -i udp_multicast -c 239.74.163.2
 
+Until the first input frame (vehicle off, cable not yet connected) every
+tick is published as no_input, so canest monitor --once finds the daemon.
+
 Signals: SIGINT/SIGTERM stop cleanly (frames queued at the stop are still
 estimated, for at most 2 s) and print where every input frame went;
 SIGHUP reloads the config (buses reopened only if their settings changed; a
