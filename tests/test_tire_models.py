@@ -3,8 +3,8 @@ import numpy as np
 import pytest
 
 from canest.models import tire_force, two_track
-from canest.models.tire import (TireModelParams, cornering_stiffness, left_shares, magic_formula, magic_formula_slope,
-                                peak_input, slip_for_force)
+from canest.models.tire import (TireModelParams, cornering_stiffness, left_shares, magic_formula, magic_formula_input,
+                                magic_formula_slope, slip_for_force)
 from canest.models.tire_force import AxDrivenTireForceModel, TireForceModel
 from canest.models.two_track import TwoTrackModel
 from canest.models.wheel_force import WheelAcceleration, longitudinal_forces
@@ -32,16 +32,23 @@ def test_degressive_cornering_stiffness_equals_the_configured_one_at_static_load
     assert cornering_stiffness(50000.0, 8000.0, 4000.0, 2.0) < 2 * 50000.0  # less than proportional
 
 
-def test_the_slip_for_a_force_inverts_the_magic_formula_up_to_its_peak():
-    stiffness, shape, curvature, peak = 50000.0, 1.3, -0.3, 4000.0
-    peak_x = peak_input(shape, curvature)
-    peak_slip = peak_x * shape * peak / stiffness
-    slips = np.linspace(0.0, 0.98 * peak_slip, 25)
+@pytest.mark.parametrize("curvature", (-10.0, -2.0, -0.3, 0.0, 0.5, 0.9, 0.99, 1.0))
+def test_the_magic_formula_s_inner_function_is_inverted_to_rounding(curvature):
+    x = np.linspace(0.0, 20.0, 401)  # a tire's peak lies at 2-4
+    phi = x - curvature * (x - np.arctan(x))
+    np.testing.assert_allclose(magic_formula_input(phi, curvature), x, rtol=1e-9, atol=1e-12)
+
+
+@pytest.mark.parametrize("shape, curvature", ((1.3, -0.3), (1.3, -0.6), (1.6, 0.2), (1.0, 0.0), (0.8, -1.0)))
+def test_the_slip_for_a_force_inverts_the_magic_formula_up_to_its_peak(shape, curvature):
+    stiffness, peak = 50000.0, 4000.0
+    slips = np.linspace(0.0, 1.0, 20001)
     forces = magic_formula(slips, stiffness, shape, curvature, peak)
-    np.testing.assert_allclose(slip_for_force(-forces, stiffness, shape, curvature, peak, peak_x), slips,
-                               atol=1e-6)  # either side's force
-    assert magic_formula(peak_slip, stiffness, shape, curvature, peak) == pytest.approx(peak)
-    assert slip_for_force(1.5 * peak, stiffness, shape, curvature, peak, peak_x) == pytest.approx(peak_slip)
+    rising = slips[: np.argmax(forces)]  # up to the peak (a curve of shape <= 1 rises throughout)
+    np.testing.assert_allclose(slip_for_force(-forces[: rising.size], stiffness, shape, curvature, peak), rising,
+                               rtol=1e-6, atol=1e-9)  # either side's force
+    if shape > 1.0:  # beyond the peak: the peak's slip
+        assert slip_for_force(1.5 * peak, stiffness, shape, curvature, peak) == pytest.approx(rising[-1], abs=1e-4)
 
 
 def test_an_axle_s_split_leans_on_the_loaded_wheel_the_more_the_stiffer_its_load_makes_it():

@@ -24,7 +24,7 @@ from canest.estimation.lags import FadingMaximum
 from canest.estimation.reference_speed import TORQUES
 from canest.estimation.roll_lag import LoadAccelerations, accelerations
 from canest.models import tire_force
-from canest.models.tire import left_shares, peak_input, relaxation_rate, slip_for_force
+from canest.models.tire import left_shares, relaxation_rate, slip_for_force
 from canest.models.tire_force import AxDrivenTireForceModel, TireForceModel
 from canest.models.wheels import MIN_WHEEL_SPEED
 from canest.models.wheel_force import WheelAcceleration, longitudinal_forces
@@ -62,7 +62,6 @@ class TireForceEstimator(Estimator):
         self.other_sensitivities = (config.vehicle.tire.load_sensitivity
                                     * LOAD_SENSITIVITY_SPAN ** exponents)[:, None]
         self.friction_slip = FadingMaximum(self.dt, validity.MODEL_ERROR_MEMORY)  # :meth:`_sideslip_friction_std`
-        self.peak_x = peak_input(config.vehicle.tire.lateral_shape, config.vehicle.tire.lateral_curvature)
 
     def reset(self) -> None:
         super().reset()
@@ -144,7 +143,7 @@ class TireForceEstimator(Estimator):
         stiffness = self.model.wheels.cornering_stiffness(loads, tire)
         rear = slice(2, 4)
         slips = slip_for_force(forces[rear], stiffness[rear], tire.lateral_shape, tire.lateral_curvature,
-                               frictions * loads[rear], self.peak_x).mean(axis=1)
+                               frictions * loads[rear]).mean(axis=1)
         return self.friction_slip.update(float(np.sqrt(np.mean((slips[:-1] - slips[-1]) ** 2))))
 
     def _split_std(self) -> np.ndarray:

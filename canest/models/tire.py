@@ -32,8 +32,6 @@ needs the sign above (tests/test_tire_models.py integrates it).
 """
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from canest.params import TireModelParams  # noqa: F401  (re-exported: the tire model's parameters)
@@ -63,27 +61,33 @@ def magic_formula(slip, stiffness, shape: float, curvature: float, peak):
     return peak * np.sin(shape * np.arctan(bs - curvature * (bs - np.arctan(bs))))
 
 
-def peak_input(shape: float, curvature: float) -> float:
-    """``B s`` at :func:`magic_formula`'s peak, where ``shape atan(x - E (x - atan x)) = pi / 2``; by bisection."""
-    target, low, high = math.tan(0.5 * math.pi / shape), 0.0, 100.0
-    for _ in range(60):
-        x = 0.5 * (low + high)
-        low, high = (x, high) if x - curvature * (x - math.atan(x)) < target else (low, x)
-    return 0.5 * (low + high)
+NEWTON_STEPS = 8  # :func:`magic_formula_input`: exact to rounding for every curvature canest admits (-10 to 1)
 
 
-def slip_for_force(force, stiffness, shape: float, curvature: float, peak, peak_x: float):
+def magic_formula_input(phi, curvature: float):
+    """The ``x = B s`` (>= 0) at which the Magic Formula's inner function ``x - E (x - atan x)`` equals ``phi``
+    (>= 0); vectorized. Newton's method from ``x = phi``, monotone: for ``E <= 0`` the function is convex and
+    ``phi`` lies above the root, for ``0 < E < 1`` concave and below it; at ``E = 1`` it is ``atan x``, bounded by
+    ``pi / 2``, and ``phi`` is held below that."""
+    if curvature >= 1.0:
+        phi = np.minimum(phi, 0.5 * np.pi - 1e-6)
+    x = np.asarray(phi, dtype=float)
+    for _ in range(NEWTON_STEPS):
+        x = x - ((1.0 - curvature) * x + curvature * np.arctan(x) - phi) / (1.0 - curvature
+                                                                            + curvature / (1.0 + x * x))
+    return x
+
+
+def slip_for_force(force, stiffness, shape: float, curvature: float, peak):
     """The slip (>= 0) at which :func:`magic_formula` carries ``|force|``, the peak's slip where the force is
-    beyond the peak; ``peak_x``: :func:`peak_input` of the curve; vectorized over broadcast arrays, by bisection on
-    ``B s`` (the curve rises monotonically up to its peak)."""
+    beyond the peak (a curve of ``shape <= 1`` has none: it rises towards ``sin(shape pi / 2)`` of ``peak``, and
+    the slip is taken just below that); vectorized over broadcast arrays. The formula's outer part inverts in
+    closed form, ``atan(x - E (x - atan x)) = asin(|F| / D) / C``, its inner one by :func:`magic_formula_input`."""
     peak = np.maximum(peak, MIN_PEAK)
-    share = np.minimum(np.abs(force) / peak, 1.0)
-    low, high = np.zeros_like(share), np.full_like(share, peak_x)
-    for _ in range(30):
-        x = 0.5 * (low + high)
-        below = np.sin(shape * np.arctan(x - curvature * (x - np.arctan(x)))) < share
-        low, high = np.where(below, x, low), np.where(below, high, x)
-    return 0.5 * (low + high) * shape * peak / np.maximum(stiffness, MIN_PEAK)
+    angle = min(0.5 * np.pi / shape, 0.5 * np.pi - 1e-6)  # the inner function's atan at the peak
+    share = np.minimum(np.abs(force) / peak, np.sin(shape * angle))
+    phi = np.tan(np.arcsin(share) / shape)
+    return magic_formula_input(phi, curvature) * shape * peak / np.maximum(stiffness, MIN_PEAK)
 
 
 def magic_formula_slope(slip, stiffness, shape: float, curvature: float, peak):
