@@ -2,12 +2,14 @@
 import numpy as np
 import pytest
 
+from canest.config import DEFAULT_CONFIG, load_config
 from canest.filters import FILTERS, Measurement, Transition
 from canest.filters.dici import DICIGeneralizedFifthDegreeCKF
 from canest.filters.dual import DoubleCubatureKalmanFilter
 from canest.filters.fusion import fuse
 from canest.filters.joint import JointCubatureKalmanFilter
-from canest.filters.sigma import GeneralizedFifthDegreeCKF
+from canest.filters.sigma import GeneralizedFifthDegreeCKF, predict_together
+from canest.models.tire_force import TireForceModel
 
 A = np.array([[1.0, 0.1], [0.0, 0.95]])
 LINEAR = Transition(lambda X, u, dt: X @ A.T)
@@ -43,6 +45,43 @@ def test_identical_local_filters_reduce_to_one_gfckf():
             filt.update(np.array([z]), POSITION, None, np.eye(1) * 0.2)
     np.testing.assert_allclose(dici.x, single.x, atol=1e-9)
     np.testing.assert_allclose(dici.P, single.P, atol=1e-9)
+
+
+def test_batched_local_time_updates_equal_separate_ones_on_the_tire_force_model():
+    """Step 1 (eqs 28-31) with both local filters' cubature points through one RK4 call of the 7-state model equals
+    each local filter's own predict; the filter's fused prediction too."""
+    model = TireForceModel(load_config(DEFAULT_CONFIG).vehicle)
+    transition = Transition(model.transition)
+    u = np.array([0.04, 0.3, 4.5, 0.0, 300.0, 300.0, -50.0, -50.0])  # a left turn at 22 m/s, ay 4.5 m/s^2
+    x0 = np.array([0.2, -0.01, 22.0, 2500.0, 1800.0, 2200.0, 1600.0])
+    P0 = np.diag([0.05, 0.02, 1.0, 800.0, 800.0, 800.0, 800.0]) ** 2
+    Q = np.diag([0.05, 0.01, 0.3, 3e3, 3e3, 3e3, 3e3]) ** 2 * 0.01
+    rng = np.random.default_rng(4)
+    dici = DICIGeneralizedFifthDegreeCKF(x0, P0)
+    for local in dici.locals:  # distinct, correlated posteriors
+        root = np.linalg.cholesky(local.P) @ (np.eye(7) + 0.3 * rng.standard_normal((7, 7)))
+        local.x, local.P = x0 + np.sqrt(np.diag(local.P)) * rng.standard_normal(7), root @ root.T
+    separate = [GeneralizedFifthDegreeCKF(local.x, local.P) for local in dici.locals]
+    for local, scale in zip(separate, dici.process_scale):
+        local.predict(transition, u, 0.01, Q * scale)
+    dici.predict(transition, u, 0.01, Q)
+    for batched, alone in zip(dici.locals, separate):
+        np.testing.assert_allclose(batched.x, alone.x, rtol=1e-12, atol=1e-12)
+        np.testing.assert_allclose(batched.P, alone.P, rtol=1e-12, atol=1e-12 * np.abs(alone.P).max())
+        assert batched.repairs == alone.repairs
+    fused = fuse(dici.fusion, [f.x for f in separate], [f.P for f in separate])
+    np.testing.assert_allclose(dici.x, fused.x, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(dici.P, fused.P, rtol=1e-12, atol=1e-12 * np.abs(fused.P).max())
+
+
+def test_batched_time_update_refuses_a_filter_with_its_own():
+    class Tempered(GeneralizedFifthDegreeCKF):
+        def predict(self, transition, u, dt, Q):
+            super().predict(transition, u, dt, 2.0 * Q)
+
+    filters = [GeneralizedFifthDegreeCKF(np.zeros(2), np.eye(2)), Tempered(np.zeros(2), np.eye(2))]
+    with pytest.raises(TypeError, match="Tempered"):
+        predict_together(filters, LINEAR, None, 0.01, [Q, Q])
 
 
 def test_ici_keeps_a_dominating_local_filter_and_uses_the_other_when_it_is_alone():

@@ -5,7 +5,8 @@ noise and sensor set (eq 45: the second local filter starts with ten times the
 first's covariance and runs with ten times its process noise; each uses its own
 IMU with that IMU's measurement noise). Per step:
 
-1. time update of every local filter (eqs 28-31);
+1. time update of every local filter (eqs 28-31), the points of all of them
+   through one call of the model's transition;
 2. ICI primary fusion of the local predictions (eqs 32-34) -> ``x-, P-``;
 3. measurement update of every local filter with its own measurements, from
    cubature points of the fused prediction (eqs 35-41);
@@ -29,7 +30,7 @@ import numpy as np
 
 from canest.filters.base import GaussianFilter, Measurement, Transition
 from canest.filters.fusion import METHODS, fuse
-from canest.filters.sigma import GeneralizedFifthDegreeCKF
+from canest.filters.sigma import GeneralizedFifthDegreeCKF, predict_together
 
 PAPER_SCALES = (1.0, 10.0)  # eq 45: local filter 2 has ten times the covariance and process noise of filter 1
 
@@ -62,9 +63,9 @@ class DICIGeneralizedFifthDegreeCKF(GaussianFilter):
         self.repairs = sum(f.repairs for f in self.locals)
 
     def predict(self, transition: Transition, u, dt: float, Q: np.ndarray) -> None:
-        """Steps 1-2: local time updates, then the primary fusion."""
-        for local, scale in zip(self.locals, self.process_scale):
-            local.predict(transition, u, dt, Q * scale)
+        """Steps 1-2: local time updates, all local filters' cubature points through one call of the transition
+        (:func:`canest.filters.sigma.predict_together`), then the primary fusion."""
+        predict_together(self.locals, transition, u, dt, [Q * scale for scale in self.process_scale])
         self._fuse()
 
     def update(self, z, measurement: Measurement, u, R) -> None:

@@ -51,7 +51,15 @@ class SigmaPointFilter(GaussianFilter):
         return (A * self.wc[:, None]).T @ B
 
     def predict(self, transition: Transition, u, dt: float, Q: np.ndarray) -> None:
-        X = transition.f(self.points(), u, dt)
+        """Time update (DICI-GFCKF eqs 28-31): :meth:`points` through ``f``, then :meth:`predict_from`."""
+        self.predict_from(transition.f(self.points(), u, dt), Q)
+
+    def predict_from(self, X: np.ndarray, Q: np.ndarray) -> None:
+        """The time update's moments from the propagated points ``X = f(X_i)`` (the mean and covariance of
+        DICI-GFCKF eqs 28-31): ``x- = sum wm_i X_i``, ``P- = sum wc_i (X_i - x-)(X_i - x-)^T + Q``, symmetrized.
+        With nonnegative weights and Q positive definite, P- is positive definite by construction; a rule with
+        negative weights (the generalized fifth-degree rule's 2n axis points for n = 7) can make it indefinite,
+        and the next factorization repairs it and counts it (module docstring)."""
         self.x = self.wm @ X
         dX = X - self.x
         self.P = symmetrize(self._cov(dX, dX) + Q)
@@ -81,6 +89,28 @@ class SigmaPointFilter(GaussianFilter):
             K[~gain_mask(K @ y)] = 0.0
         H = np.linalg.solve(self.P, Pxz).T
         self.apply_gain(y, S, K, H, R)
+
+
+def predict_together(filters, transition: Transition, u, dt: float, Qs) -> None:
+    """The time update of several sigma-point filters with one evaluation of ``f`` (DICI-GFCKF eqs 28-31 for each
+    local filter j): every filter's points ``X_j,i = x_j + S_j xi_i`` (``S_j S_j^T = P_j``) are stacked and
+    propagated together, ``f(X_j,i)``, and each filter takes its mean and covariance from its own rows
+    (:meth:`SigmaPointFilter.predict_from` with ``Qs[j]``).
+
+    The same result as ``filters[j].predict(transition, u, dt, Qs[j])`` for each j, to rounding, where ``f`` maps
+    each point on its own (as the vectorized models do), at about the cost of one call: numpy's per-call
+    overhead, not the number of points, dominates a model evaluation. Only for filters whose time update is
+    :meth:`SigmaPointFilter.predict` itself (a subclass that overrides it would silently lose its own).
+    """
+    for filt in filters:
+        if type(filt).predict is not SigmaPointFilter.predict:
+            raise TypeError(f"{type(filt).__name__} has its own time update; predict it on its own")
+    points = [filt.points() for filt in filters]
+    X = transition.f(np.concatenate(points), u, dt)
+    start = 0
+    for filt, own, Q in zip(filters, points, Qs):
+        filt.predict_from(X[start:start + len(own)], Q)
+        start += len(own)
 
 
 class RuleFilter(SigmaPointFilter):
