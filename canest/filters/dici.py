@@ -14,7 +14,7 @@ IMU with that IMU's measurement noise). Per step:
 
 The local filters keep their own posteriors for the next time update.
 
-Corrections to the printed algorithm, each checked in tests/test_dici.py:
+Corrections to the printed algorithm, each checked in tests/test_dici_dual.py:
 eq 35 spreads the points with ``P^ICI`` where its square root is meant (as in
 eq 28); eq 41 subtracts the gain term from the local prediction ``P_j,k+1/k``
 while eq 40 and the cross-covariance of eq 38 start from the fused prediction;

@@ -98,8 +98,9 @@ def predict_together(filters, transition: Transition, u, dt: float, Qs) -> None:
     (:meth:`SigmaPointFilter.predict_from` with ``Qs[j]``).
 
     The same result as ``filters[j].predict(transition, u, dt, Qs[j])`` for each j, to rounding, where ``f`` maps
-    each point on its own (as the vectorized models do), at about the cost of one call: numpy's per-call
-    overhead, not the number of points, dominates a model evaluation. Only for filters whose time update is
+    each point on its own (as the vectorized models do), for less than the separate calls cost: numpy's per-call
+    overhead dominates a model evaluation (one RK4 step of the tire-force model on 198 points 426 us, on 99 points
+    321 us, measured). Only for filters whose time update is
     :meth:`SigmaPointFilter.predict` itself (a subclass that overrides it would silently lose its own).
     """
     for filt in filters:
