@@ -142,6 +142,19 @@ def test_calibration_is_sent_once_a_second_one_page_per_parameter(config, estima
     assert message_cycle_ms() == 1000
 
 
+def test_calibration_and_causes_keep_their_cycle_when_the_clock_steps_back(estimates):
+    """A silent bus's ticks run on the service's clock (epoch seconds); the first frame's time base may be an
+    adapter's own. The next sends were planned on the old base: CE_Calibration and CE_ValidityCause stayed silent
+    (causes unchanged) until that base's time came round."""
+    encoder = EstimateEncoder(REFERENCE)
+    report = estimates[1]
+    encoder.encode(tick(1.7e9, report))  # on the service's clock
+    frames = [f for k in range(300) for f in encoder.encode(tick(100.0 + k * 0.01, report))]  # the adapter's
+    assert [page["CalParameter"] for page in decoded_pages(frames)] == list(range(len(NAMES))) * 3
+    causes = cantools.database.load_file(str(REFERENCE)).get_message_by_name("CE_ValidityCause")
+    assert sum(f.arbitration_id == causes.frame_id for f in frames) == 3000 // causes.cycle_time  # unchanged causes
+
+
 def message_cycle_ms():
     return cantools.database.load_file(str(REFERENCE)).get_message_by_name(CALIBRATION_MESSAGE).cycle_time
 

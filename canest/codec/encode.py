@@ -117,6 +117,13 @@ class _Sender:
         self.counter = 0
         self.cycle_time = (message.cycle_time or 0) / 1000.0  # s
 
+    def due(self, t: float, next_at: float) -> bool:
+        """Whether a message sent at its cycle is due at ``t``, its next send planned at ``next_at``: also where
+        ``t`` lies more than a cycle before it, a clock that stepped back (the frames' time base taking over
+        from a silent bus's ticks on the service's clock, an adapter's stamps, a log's clock step): planned on
+        the old base, it would have been sent on change only until that base's time came round."""
+        return t >= next_at or t < next_at - self.cycle_time
+
     def frame(self, values: dict, timestamp: float, channel) -> can.Message:
         values[self.counter_name] = self.counter
         values[self.crc_name] = 0
@@ -178,10 +185,11 @@ class EstimateEncoder:
         }, estimate.t, self.channel))
         causes = {signal: estimate.cause_code(group) for signal, group in CAUSE_SIGNALS.items()}
         sender = self.senders[CAUSE_MESSAGE]
-        if causes != self.last_causes or estimate.t >= self.next_causes:
+        if causes != self.last_causes or sender.due(estimate.t, self.next_causes):
             frames.append(sender.frame(dict(causes), estimate.t, self.channel))
             self.last_causes, self.next_causes = causes, estimate.t + sender.cycle_time
-        if self.has_calibration and estimate.calibration and estimate.t >= self.next_calibration:
+        if (self.has_calibration and estimate.calibration
+                and self.senders[CALIBRATION_MESSAGE].due(estimate.t, self.next_calibration)):
             frames += self._calibration_frames(estimate)
         return frames
 
