@@ -57,7 +57,7 @@ class TireForceEstimator(Estimator):
         self.force_inputs = TORQUES if self.torques else ("ax",)  # what the longitudinal forces come from
         self.wheel_acceleration = WheelAcceleration()
         self.load_accelerations = LoadAccelerations(self.dt)
-        self.load_inputs = (0.0, 0.0)  # ax, ay as the loads took them on the last tick (:meth:`_control`)
+        self.loads = self.model.wheels.static_load  # the wheel loads of the last tick (:meth:`_control`)
         exponents = 2.0 * (np.arange(SPLIT_POINTS) + 0.5) / SPLIT_POINTS - 1.0
         self.other_sensitivities = (config.vehicle.tire.load_sensitivity
                                     * LOAD_SENSITIVITY_SPAN ** exponents)[:, None]
@@ -105,14 +105,15 @@ class TireForceEstimator(Estimator):
         slows vx beside the tires' forces: without torques vx then follows ax less it, as the single track's vx
         does (the core takes the reference speed's integration error as this model's own, so it must integrate
         the same ax); with torques a grade's gravity no longer runs vx ahead of the reference speed uphill."""
-        ax, ay = self.load_inputs = self.load_accelerations.update(inputs)
+        ax, ay = self.load_accelerations.update(inputs)
+        self.loads = self.model.wheels.loads(ax, ay)
         offset = self.reference_speed.offset.value
         if not self.torques:
             return np.array([self._road_wheel_angle(inputs), ax, ay, offset])
         speeds = [inputs.values.get(name, 0.0) for name in WHEEL_SPEEDS]
         fx = longitudinal_forces(torques(inputs), self.wheel_acceleration.update(t, speeds),
                                  self.vehicle.wheel_inertia, self.vehicle.wheel_radius,
-                                 self.vehicle.tire.rolling_resistance * self.model.wheels.loads(ax, ay))
+                                 self.vehicle.tire.rolling_resistance * self.loads)
         return np.array([self._road_wheel_angle(inputs), ax, ay, offset, *fx])
 
     def _sideslip_friction_std(self) -> float:
@@ -133,7 +134,7 @@ class TireForceEstimator(Estimator):
         if self.low_speed:
             return 0.0
         tire = self.vehicle.tire
-        loads = self.model.wheels.loads(*self.load_inputs)
+        loads = self.loads
         forces = self.filter.x[tire_force.FY]
         if not (np.all(np.isfinite(forces)) and np.all(loads > 0.0)):
             return 0.0
@@ -160,8 +161,7 @@ class TireForceEstimator(Estimator):
         a std of 200 (the simulator's tires: ``q`` 1.5 where the config says 2.0), flagged valid."""
         forces = self.filter.x[tire_force.FY]
         left, axle = forces[0::2], forces[0::2] + forces[1::2]
-        shares = left_shares(self.model.wheels.loads(*self.load_inputs), self.model.wheels.static_load,
-                             self.other_sensitivities)
+        shares = left_shares(self.loads, self.model.wheels.static_load, self.other_sensitivities)
         return np.repeat(np.sqrt(np.mean((shares * axle - left) ** 2, axis=0)), 2)
 
     def _update(self, channels, inputs: TickInputs, u: np.ndarray, lateral_ok: bool, t: float) -> bool:
