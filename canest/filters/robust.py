@@ -68,8 +68,6 @@ class MaximumCorrentropySCKF(SquareRootCubatureKalmanFilter):
         self.sigma_min = min_kernel_width
         self.max_iterations = max_iterations
         self.tol = tol
-        self.kernel_weights = None
-        self.iterations = 0
 
     def kernel_width(self, eta: float, m: int) -> float:
         return max(self.sigma_min, self.sigma0 * np.sqrt(m / max(eta, m)))
@@ -85,7 +83,7 @@ class MaximumCorrentropySCKF(SquareRootCubatureKalmanFilter):
         whitening = np.linalg.cholesky(Pzz)
         prior = self.x
         x_t = prior
-        for self.iterations in range(1, self.max_iterations + 1):
+        for _ in range(self.max_iterations):
             e = np.linalg.solve(whitening, y - H @ (x_t - prior))
             weights = np.maximum(np.exp(-e**2 / (2.0 * sigma**2)), self.min_weight)
             sqrt_R_tilde = sqrt_R / np.sqrt(weights)  # columns scaled: S_R C^-1/2
@@ -96,6 +94,5 @@ class MaximumCorrentropySCKF(SquareRootCubatureKalmanFilter):
             x_t = x_next
             if converged:
                 break
-        self.kernel_weights = weights
         self._correct(y, Xc, Zc, sqrt_R_tilde)
         self.nis = eta

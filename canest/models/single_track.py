@@ -149,9 +149,6 @@ class SingleTrackModel:
         out[:, 2] = 0.5 * vx * (1.0 + np.cos(delta)) + 0.5 * (vy + p.cg_to_front * r) * np.sin(delta)
         return out
 
-    def lateral_velocity(self, x: np.ndarray) -> float:
-        return float(x[VX] * np.tan(x[BETA]))
-
     # Exact Jacobians for the extended Kalman filters (checked against complex-step derivatives in the tests).
 
     def _force_gradients(self, x, u):
