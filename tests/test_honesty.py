@@ -14,6 +14,7 @@ import pytest
 
 from canest.apps.evaluate import Score, counts, read_table, valid_mask
 from canest.config import load_config
+from canest.signals import WHEELS
 from canest.sim.mismatch import PlantMismatch, drawn_mismatch
 from tests.conftest import CONFIG, ROOT
 
@@ -34,6 +35,12 @@ def replayed(case, name, workdir, process_noise=None):
         noise = {**config.estimator.process_noise, **process_noise}
         config = dataclasses.replace(config, estimator=dataclasses.replace(config.estimator, process_noise=noise))
     return honesty.replayed(config, name, log)[0], read_table(truth)
+
+
+def per_wheel(result, name: str, state: str) -> list:
+    """The four wheels' scores of ``state`` (``fy`` or ``mu``) for filter ``name`` in one
+    :func:`honesty.run_case` result."""
+    return [honesty.summarize(f"{state}_{wheel}", result["sums"][name][f"{state}_{wheel}"]) for wheel in WHEELS]
 
 
 @pytest.fixture(scope="module")
@@ -280,8 +287,7 @@ def test_the_lateral_forces_std_is_the_tire_curves_error_not_a_random_walks(tmp_
     ``validity.RETURN_MEMORY``; judged over more than a fifth.)"""
     case = honesty.Case("sine", 80.0, 0.85, 2, car="drawn")
     result = honesty.run_case(CONFIG, ["dici-gfckf"], case, tmp_path)
-    scores = [honesty.summarize(f"fy_{wheel}", result["sums"]["dici-gfckf"][f"fy_{wheel}"])
-              for wheel in ("fl", "fr", "rl", "rr")]
+    scores = per_wheel(result, "dici-gfckf", "fy")
     assert all(score.valid > 0.2 and score.vbw == 0.0 for score in scores), scores
     assert 0.4 <= sum(score.nees for score in scores) / len(scores) <= 2.0, scores
     sideslip = honesty.summarize("beta", result["sums"]["dici-gfckf"]["beta"])
@@ -375,8 +381,7 @@ def test_a_vibrating_ay_does_not_move_force_between_an_axle_s_wheels(tmp_path):
     loads take ay through the body's roll lag (:mod:`canest.estimation.roll_lag`)."""
     case = honesty.Case("step", 80.0, 0.85, 2, vibration=1.0)
     result = honesty.run_case(CONFIG, ["dici-gfckf"], case, tmp_path)
-    scores = [honesty.summarize(f"fy_{wheel}", result["sums"]["dici-gfckf"][f"fy_{wheel}"])
-              for wheel in ("fl", "fr", "rl", "rr")]
+    scores = per_wheel(result, "dici-gfckf", "fy")
     assert all(score.valid > 0.3 and score.vbw == 0.0 for score in scores), scores
 
 
@@ -388,8 +393,7 @@ def test_a_friction_split_on_one_road_is_published_as_uncertain(tmp_path, mu):
     tire's limit (the yaw rate stayed on the linear one): what split the frictions was the stiffness's error, and
     none is valid. On 0.35 the limit shows and the frictions are measured, where they are right."""
     result = honesty.run_case(CONFIG, ["jckf"], honesty.Case("step", 80.0, mu, 0, car="drawn"), tmp_path)
-    scores = [honesty.summarize(f"mu_{wheel}", result["sums"]["jckf"][f"mu_{wheel}"])
-              for wheel in ("fl", "fr", "rl", "rr")]
+    scores = per_wheel(result, "jckf", "mu")
     assert not any(score.vbw > 0.0 for score in scores), scores
     share = sum(score.valid for score in scores) / len(scores)
     assert (share == 0.0) if mu == 0.85 else (share > 0.3), scores  # measured only where the car showed its limit
@@ -404,8 +408,7 @@ def test_a_friction_its_neighbours_disagree_with_is_never_valid_and_wrong(tmp_pa
     of the frictions' valid ticks were wrong. With it, within 2 std is 100 % there (NEES 0.31-0.65): an
     over-coverage this floor costs, as README "How far to trust the output" says."""
     result = honesty.run_case(CONFIG, ["jckf"], honesty.Case(maneuver, 80.0, mu, seed, car="drawn"), tmp_path)
-    scores = [honesty.summarize(f"mu_{wheel}", result["sums"]["jckf"][f"mu_{wheel}"])
-              for wheel in ("fl", "fr", "rl", "rr")]
+    scores = per_wheel(result, "jckf", "mu")
     assert not any(score.vbw > 0.0 for score in scores), scores
     assert max(score.valid for score in scores) > 0.05, scores  # measured where it can be
 
@@ -419,8 +422,7 @@ def test_a_friction_still_moving_is_never_valid_and_wrong(tmp_path, maneuver):
     0.22-2.73 % of the frictions' valid ticks), and the honesty, force-estimator, vibration and dual-filter tests
     passed."""
     result = honesty.run_case(CONFIG, ["jckf"], honesty.Case(maneuver, 80.0, 0.85, 0, car="drawn"), tmp_path)
-    scores = [honesty.summarize(f"mu_{wheel}", result["sums"]["jckf"][f"mu_{wheel}"])
-              for wheel in ("fl", "fr", "rl", "rr")]
+    scores = per_wheel(result, "jckf", "mu")
     assert not any(score.vbw > 0.0 for score in scores), scores
 
 
@@ -453,8 +455,7 @@ def test_a_friction_is_valid_only_after_the_car_showed_a_tire_s_limit(tmp_path, 
     right)."""
     case = honesty.Case(maneuver, 80.0, mu, seed, duration=duration)
     result = honesty.run_case(CONFIG, ["jckf"], case, tmp_path)
-    scores = [honesty.summarize(f"mu_{wheel}", result["sums"]["jckf"][f"mu_{wheel}"])
-              for wheel in ("fl", "fr", "rl", "rr")]
+    scores = per_wheel(result, "jckf", "mu")
     if maneuver == "launch":
         assert all(score.valid > 0.1 and score.vbw == 0.0 for score in scores), scores
     else:  # no tire's limit on these curves: the frictions are not measured, whatever the model made of them
