@@ -96,7 +96,7 @@ def test_frictions_flagged_valid_are_right(scores):
     the car slid. The std now carries the stiffness's error and the range the estimate spanned over a second.
     Measured on low friction: valid on 6.9 % of these 4 s drives' ticks (13-17 % before the limit's yaw test
     took the understeer gradient's std, which shows a limit later; the full grid's 24-28 -> 23-26 %)."""
-    for wheel in ("fl", "fr", "rl", "rr"):
+    for wheel in WHEELS:
         score = scores["jckf"][f"mu_{wheel}"]
         assert score.valid > 0.05 and score.vbw <= 0.001, (wheel, score)  # measured on low friction, never wrong
 
@@ -114,7 +114,7 @@ def test_friction_disagreeing_with_the_measured_forces_is_not_valid(vibrating, n
     """An IMU vibrating as on a real car, under the built-in config's noise: the frictions were flagged valid on
     62-88 % of ticks and wrong on 64-77 % of those (and after a divergence reset, which keeps them, at once).
     The channels that show the tires' forces disagree with the filter: friction is inconsistent, not valid."""
-    for wheel in ("fl", "fr", "rl", "rr"):
+    for wheel in WHEELS:
         score = vibrating[name][f"mu_{wheel}"]
         assert not score.vbw > 0.001, (name, score)
         assert score.valid < 0.05, (name, score)
@@ -354,7 +354,7 @@ def test_an_axle_s_split_the_model_assumes_is_in_its_wheels_forces_std(tmp_path)
     under any load sensitivity within ``tire_force.LOAD_SENSITIVITY_SPAN`` of the configured now."""
     case = honesty.Case("step", 80.0, 0.85, 0, vibration=1.0, car="drawn")
     table, truth = replayed(case, "dici-gfckf", tmp_path)
-    for wheel in ("fl", "fr", "rl", "rr"):
+    for wheel in WHEELS:
         flagged = counts(table, truth, f"fy_{wheel}", skip=honesty.SKIP)
         assert flagged["valid"] > 0.3 * flagged["ticks"] and flagged["wrong"] == 0, (wheel, flagged)
 
