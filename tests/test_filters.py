@@ -141,6 +141,19 @@ def test_adaptive_filters_publish_a_covariance_with_at_least_the_configured_nois
         FILTERS[name](np.zeros(1), np.eye(1), cov_floor=-1.0)
 
 
+@pytest.mark.parametrize("name, options", [("lmrwekf", {}), ("svd-fckf", {"adapt_q": False})])
+def test_adaptive_filters_say_which_noise_their_published_covariance_took(name, options):
+    """A sensor 2.5x louder than configured (a vibrating gyro): the published covariance took the learned R, which the
+    estimator's yaw-rate std must not count a second time (``Estimator._gyro_noise``); a quieter one: the configured
+    R. A filter that does not learn R took the configured one."""
+    loud, _ = run_scalar_random_walk(name, true_r=0.25, configured_r=0.04, window=50, **options)
+    assert loud.noise_taken(0, 0.04) == pytest.approx(loud.R_estimate[0, 0])
+    assert 0.15 < loud.noise_taken(0, 0.04) < 0.4  # the learned R, below its ceiling (10x the configured)
+    quiet, _ = run_scalar_random_walk(name, true_r=0.04, configured_r=1.0, window=50, **options)
+    assert quiet.noise_taken(0, 1.0) == 1.0
+    assert FILTERS["ckf"](np.zeros(1), np.eye(1)).noise_taken(0, 0.04) == 0.04
+
+
 def test_svd_fckf_adaptive_q_of_eq_29_is_indeterminate():
     """Q = K E K^T with E = P- + R is exactly P- - P+ for every P-: it confirms whatever P- the filter
     has, so it cannot pull a mistuned filter back. Measured on the random walk above: RMSE 0.117 with

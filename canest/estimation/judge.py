@@ -199,7 +199,8 @@ class StateJudge:
               lateral: float = 0.0, gyro_noise: float = 1.0, walk: float = 0.0, walk_apart: bool = False,
               reference_gap: float = 0.0, vx: float = 0.0, beta_floor: float = 0.0) -> np.ndarray:
         """The published std: each state's by its channels' consistency, the yaw rate's also by its gyro's noise as
-        measured over configured (``gyro_noise``, :mod:`canest.estimation.measured_noise`; never narrowed by it), vx
+        measured over what the covariance took (``gyro_noise``, :meth:`canest.estimation.core.Estimator._gyro_noise`,
+        :mod:`canest.estimation.measured_noise`; never narrowed by it), vx
         with its lateral drift (``lateral``, :meth:`lateral_std`) and the reference speed's random walk, the error every
         tick it was updated shares (``walk``, :meth:`canest.estimation.reference_speed.ReferenceSpeed.integration_std`):
         in quadrature where the covariance holds only the error beside it (``walk_apart``: a model integrating ax that

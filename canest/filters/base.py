@@ -81,6 +81,11 @@ class GaussianFilter:
         """The covariance the estimator publishes and judges with (P; an adaptive filter keeps its own)."""
         return self.P
 
+    def noise_taken(self, channel: int, configured: float) -> float:
+        """The noise variance of measurement ``channel`` that :attr:`covariance` took at its last update: the
+        ``configured`` one, which every update gets."""
+        return configured
+
     def repair(self, P: np.ndarray) -> np.ndarray:
         """Nearest symmetric matrix with eigenvalues >= EIGEN_FLOOR * max(1, largest); counted."""
         self.repairs += 1
