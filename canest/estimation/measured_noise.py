@@ -35,8 +35,9 @@ accelerometer channel's R (ax, ay; the consistency test takes it too, but
 friction's and the divergence test keep the configured noise,
 :mod:`canest.estimation.validity`; the
 published ``InnovationNis`` is the filter's, with the R it used); the published yaw
-rate's std, times the gyro's measured over configured noise
-(:meth:`canest.estimation.judge.StateJudge.widen`), which with the hold's factor
+rate's std, times the gyro's measured noise over the noise the filter's covariance took for it (the
+configured, or an adaptive filter's learned R where larger: :meth:`canest.estimation.core.Estimator._gyro_noise`;
+:meth:`canest.estimation.judge.StateJudge.widen`), which with the hold's factor
 (:meth:`canest.estimation.gyro_hold.GyroHold.noise_factor`) the yaw rate's consistency test also judges the
 gyro under (:meth:`canest.estimation.judge.StateJudge.record`), and the two-track model's yaw acceleration, the gyro's slope,
 by the slope of the gyro's noise beyond the configured (its R:

@@ -33,8 +33,9 @@ Published standard deviations get these terms beyond the filter's covariance:
   standard deviation is scaled by ``sqrt(k)`` (innovation-driven, as a
   covariance-matching adaptive filter would scale Q, but on the published
   value only, so every filter's estimate stays what its paper gives);
-- the yaw rate's gyro noise as its samples show it, over the configured
-  (:mod:`canest.estimation.measured_noise`, a factor never below 1): a
+- the yaw rate's gyro noise as its samples show it, over the noise the
+  filter's covariance took for it (the configured, or an adaptive filter's
+  learned R: :mod:`canest.estimation.measured_noise`, a factor never below 1): a
   vibrating gyro's coloured noise, which the prior follows, hides from the
   innovations;
 - the sideslip's model error: a rear cornering stiffness off by a relative
