@@ -449,11 +449,12 @@ class Estimator:
         or an adaptive filter's learned R where larger (``noise_taken``, :mod:`canest.filters.adaptive`), which
         holds a vibrating gyro already. Over the configured noise, lmrwekf's yaw rate counted the vibration twice:
         on the drawn cars with a vibrating IMU within 2 std on 99.8 % of its valid ticks, NEES 0.31 (now 98.7 %,
-        0.60; svd-fckf's 97.8 % / 0.68 -> 97.6 % / 0.74, the other filters' unchanged). The largest, not the two gyros' average as a filter weighing
-        them by their configured noise would take it: the filters weigh them otherwise (svd-fckf by its adapted R,
-        dici-gfckf by covariance intersection), and with the average their yaw rate on the drawn cars with a vibrating
-        IMU was valid but wrong on 0.20 and 0.12 % of the ticks (0.07 and 0.08 % with the largest; ckf's within 2 std
-        on 98.4 instead of 99.0 %)."""
+        0.60; svd-fckf's 97.8 % / 0.68 -> 97.6 % / 0.74, the other filters' unchanged).
+
+        The largest, not the two gyros' average as a filter weighing them by their configured noise would take
+        it: the filters weigh them otherwise (svd-fckf by its adapted R, dici-gfckf by covariance intersection),
+        and with the average their yaw rate on the drawn cars with a vibrating IMU was valid but wrong on 0.20 and
+        0.12 % of the ticks (0.07 and 0.08 % with the largest; ckf's within 2 std on 98.4 instead of 99.0 %)."""
         return max((held / math.sqrt(self.filter.noise_taken(row, self.r_std[row] ** 2))
                     for row, held in self._held_gyro_noise(inputs).items()), default=1.0)
 

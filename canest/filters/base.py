@@ -82,8 +82,11 @@ class GaussianFilter:
         return self.P
 
     def noise_taken(self, channel: int, configured: float) -> float:
-        """The noise variance of measurement ``channel`` that :attr:`covariance` took at its last update: the
-        ``configured`` one, which every update gets."""
+        """The noise variance of measurement ``channel`` that :attr:`covariance` took at its last update as the
+        sensor's: the ``configured`` one here; an adaptive filter's learned R (:mod:`canest.filters.adaptive`).
+        mcsckf answers the configured too: its reweighted R is an outlier's down-weighting, not the sensor's noise
+        (taken as the noise, its yaw rate on the drawn cars with a vibrating IMU went 98.8 -> 98.5 % within 2 std,
+        valid but wrong 0.05 -> 0.06 %, next to the wrong-sign edge it is nearest to)."""
         return configured
 
     def repair(self, P: np.ndarray) -> np.ndarray:
