@@ -20,6 +20,7 @@ from tests.conftest import CONFIG, ROOT
 
 sys.path.insert(0, str(ROOT / "tools"))
 import honesty  # noqa: E402
+import std_scales  # noqa: E402
 
 FILTERS = ("ckf", "mcsckf", "svd-fckf", "jckf", "dici-gfckf")
 CALIBRATED = ("ckf", "mcsckf", "svd-fckf", "jckf")  # standard deviations covering the error at +-2 std
@@ -47,7 +48,7 @@ def per_wheel(result, name: str, state: str) -> list:
 def results(tmp_path_factory):
     args = honesty.parse_args(["--small"])
     results = honesty.grid(CONFIG, FILTERS, honesty.cases_of(args), tmp_path_factory.mktemp("honesty"),
-                           report=lambda text: None)
+                           report=lambda text: None, scales=True)
     assert not any(r.get("failed") for r in results)
     return results
 
@@ -68,6 +69,17 @@ def test_the_per_case_rows_are_the_drives_that_make_the_pooled_score(results, sc
         assert max(score.max_error for score in own) == scores[name]["vx"].max_error
     table = honesty.per_case_markdown(rows)
     assert len(table.splitlines()) == 2 + len(rows) and results[0]["case"].key in table
+
+
+def test_the_std_as_published_meets_the_targets_exactly_where_its_factor_1_does(results, scores):
+    """``--scales`` judges the factors on the std by the pooled score's own targets (factor 1: the std as
+    published); a valid yaw rate of the wrong sign is no std's matter, and none is on this grid."""
+    scales = honesty.pooled_scales(results, FILTERS)
+    outside = {(name, state) for name, state, _ in honesty.outside_targets(scores)}
+    judged = [(name, state) for name, states in scores.items() for state, score in states.items() if score.valid > 0]
+    assert len(judged) > 3 * len(FILTERS)
+    for name, state in judged:
+        assert std_scales.includes_published(scales[name][state]) == ((name, state) not in outside), (name, state, scales[name][state])
 
 
 @pytest.mark.parametrize("name", FILTERS)

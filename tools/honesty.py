@@ -10,6 +10,7 @@
     python tools/honesty.py --filters all --grade 6               # uphill at 6 %
     python tools/honesty.py --filters ckf --per-case vx            # and vx per drive: which cases make the pool
     python tools/honesty.py --small --check                        # exit status 1 if a state misses the targets
+    python tools/honesty.py --filters all --seeds 3 --scales      # and the factors on each std that would meet them
 
 For every case of maneuvers x speeds x frictions x noise seeds it simulates
 one drive (cached in ``--workdir``: tools/drive_cache.py), replays it with every filter (each on
@@ -18,7 +19,9 @@ filter and published state (vx, yaw rate, sideslip, and forces and frictions
 where estimated), the sums of :func:`canest.apps.evaluate.counts`: RMSE of the
 valid ticks, share valid, coverage of +-1/2/3 std, mean NEES, the "valid but
 wrong" share and yaw rates of the wrong sign (README "How far to trust the
-output" says what each means and the targets).
+output" says what each means and the targets). ``--scales`` also prints, per filter and state, the constant
+factors on the published std that would meet the targets (tools/std_scales.py: what they tell, and how to
+intersect several grids').
 """
 from __future__ import annotations
 
@@ -34,13 +37,14 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from canest.apps.compare import runnable, with_filter  # noqa: E402
-from canest.apps.evaluate import DISPLAY, counts, pool, read_table, summarize, table_of  # noqa: E402
+from canest.apps.evaluate import DISPLAY, WRONG_ABOVE, counts, pool, read_table, scored, summarize, table_of  # noqa: E402
 from canest.apps.replay import replay  # noqa: E402
 from canest.config import DEFAULT_CONFIG, load_config  # noqa: E402
 from canest.errors import CanestError, SimulationError  # noqa: E402
 from canest.sim.mismatch import PlantMismatch, drawn_mismatch, grade_angle  # noqa: E402
 from canest.sim.simulate import simulate  # noqa: E402
 from drive_cache import folder  # noqa: E402  (tools/, beside this file)
+import std_scales  # noqa: E402
 
 SKIP = 0.5  # s of filter convergence left out, as canest evaluate
 SMALL = {"maneuvers": "sine,step", "mu": "0.35,0.85", "seeds": 1, "duration": 4.0}
@@ -96,28 +100,32 @@ def replayed(config, name: str, log: Path) -> tuple:
     return table_of(estimates), summary
 
 
-def run_case(config_path, filters, case: Case, workdir: Path) -> dict:
-    """{filter: {state: sums}} of one case (empty if the drive could not be simulated), and seconds per filter."""
+def run_case(config_path, filters, case: Case, workdir: Path, scales: bool = False) -> dict:
+    """{filter: {state: sums}} of one case (empty if the drive could not be simulated), and seconds per filter;
+    with ``scales`` also {filter: {state: sums per factor on the std}} (:func:`std_scales.scale_sums`)."""
     config = load_config(config_path)
     paths = drive(config, case, workdir)
     if paths is None:
         return {"case": case, "failed": True}
     truth = read_table(paths[1])
-    result = {"case": case, "sums": {}, "seconds": {}, "resets": {}}
+    result = {"case": case, "sums": {}, "seconds": {}, "resets": {}, "scales": {}}
     for name in filters:
         started = time.perf_counter()
         table, summary = replayed(config, name, paths[0])
         result["seconds"][name] = time.perf_counter() - started
         result["resets"][name] = summary.get("resets", 0)
         result["sums"][name] = {s: counts(table, truth, s, skip=SKIP) for s in STATES if s in table and s in truth}
+        if scales:
+            result["scales"][name] = {s: std_scales.scale_sums(*scored(table, truth, s, skip=SKIP)[2:],
+                                                               WRONG_ABOVE.get(s, 0.0)) for s in result["sums"][name]}
     return result
 
 
-def grid(config_path, filters, cases, workdir: Path, jobs: int = 1, report=print) -> list:
-    """Every case's result (cases run ``jobs`` at a time in separate processes)."""
+def grid(config_path, filters, cases, workdir: Path, jobs: int = 1, report=print, scales: bool = False) -> list:
+    """Every case's result (cases run ``jobs`` at a time in separate processes; ``scales``: :func:`run_case`'s)."""
     workdir.mkdir(parents=True, exist_ok=True)
     with concurrent.futures.ProcessPoolExecutor(max(1, jobs)) as executor:
-        futures = [executor.submit(run_case, config_path, filters, case, workdir) for case in cases]
+        futures = [executor.submit(run_case, config_path, filters, case, workdir, scales) for case in cases]
         results = []
         for future in concurrent.futures.as_completed(futures):
             results.append(future.result())
@@ -132,6 +140,19 @@ def pooled(results, filters) -> dict:
         runs = [r["sums"][name] for r in results if not r.get("failed")]
         out[name] = {s: summarize(s, pool(run[s] for run in runs if s in run)) for s in STATES
                      if any(s in run for run in runs)}
+    return out
+
+
+def pooled_scales(results, filters) -> dict:
+    """{filter: {state: [[first, last], ...]}}: the runs of factors on the std that would put the pooled score
+    within the targets (:func:`std_scales.meets_targets`)."""
+    out = {}
+    for name in filters:
+        runs = [r["scales"][name] for r in results if not r.get("failed")]
+        states = [s for s in STATES if any(s in run for run in runs)]
+        out[name] = {s: std_scales.ranges(std_scales.meets_targets(
+            pool(run[s] for run in runs if s in run), WITHIN_TWO_STD_TARGET, NEES_TARGET, VALID_BUT_WRONG_TARGET))
+            for s in states}
     return out
 
 
@@ -244,6 +265,9 @@ def parse_args(argv=None):
     p.add_argument("--check", action="store_true",
                    help="exit with status 1 when a filter's state is outside the targets (listed below the table; "
                         "JSON: under the key 'outside')")
+    p.add_argument("--scales", action="store_true",
+                   help="also print, per filter and state, the constant factors on the published std that would meet "
+                        "the targets (JSON: under the key 'scales'; tools/std_scales.py intersects several grids')")
     p.add_argument("--small", action="store_true", help="quick subset: sine, step; mu 0.35, 0.85; 1 seed; 4 s")
     args = p.parse_args(argv)
     if args.small:
@@ -266,7 +290,8 @@ def main(argv=None) -> int:
     workdir = folder(Path(args.workdir), config, loaded.input_dbc)
     cases = cases_of(args)
     started = time.perf_counter()
-    results = grid(config, filters, cases, workdir, args.jobs, report=lambda text: print(text, file=sys.stderr))
+    results = grid(config, filters, cases, workdir, args.jobs, report=lambda text: print(text, file=sys.stderr),
+                   scales=args.scales)
     scores = pooled(results, filters)
     failed = [r["case"].key for r in results if r.get("failed")]
     rows = per_case(results, filters, args.per_case) if args.per_case else []
@@ -276,6 +301,8 @@ def main(argv=None) -> int:
         out["outside"] = [{"filter": name, "state": state, "reasons": reasons} for name, state, reasons in outside]
         if args.per_case:
             out["per_case"] = [{"case": key, "filter": name, **dataclasses.asdict(score)} for key, name, score in rows]
+        if args.scales:
+            out["scales"] = pooled_scales(results, filters)
         print(json.dumps(out, indent=1))
     else:
         print(f"{len(cases) - len(failed)} cases x {len(filters)} filters in {time.perf_counter() - started:.0f} s"
@@ -284,6 +311,9 @@ def main(argv=None) -> int:
         print("\n" + outside_markdown(outside))
         if args.per_case:
             print(f"\n{args.per_case} per case:\n" + per_case_markdown(rows))
+        if args.scales:
+            print("\nConstant factors on the published std that would meet the targets (* the std as published):\n"
+                  + std_scales.markdown(std_scales.common([pooled_scales(results, filters)]), ["this grid"]))
     return 1 if args.check and outside else 0
 
 

@@ -146,8 +146,10 @@ def valid_mask(estimate: dict, state: str) -> np.ndarray:
     return (estimate["valid"].astype(np.int64) >> VALID_BITS.index(state)) & 1 == 1
 
 
-def counts(estimate: dict, truth: dict, state: str, only_valid: bool = True, skip: float = 0.0) -> dict:
-    """Additive sums of one state on one run, in display units (pool runs with :func:`pool`)."""
+def scored(estimate: dict, truth: dict, state: str, only_valid: bool = True, skip: float = 0.0) -> tuple:
+    """``(inside, use, error, std)`` of one state on one run: the masks of the ticks inside the truth's span (after
+    ``skip`` s, with a finite value) and of those scored (the valid ones unless ``only_valid`` is False), and the
+    scored ticks' absolute error and published std in display units (NaN where the state has no std)."""
     _, factor = DISPLAY.get(state, ("", 1.0))
     t = estimate["t"]
     inside = (t >= truth["t"][0] + skip) & (t <= truth["t"][-1]) & np.isfinite(estimate[state])
@@ -155,6 +157,13 @@ def counts(estimate: dict, truth: dict, state: str, only_valid: bool = True, ski
     error = np.abs(estimate[state][use] - np.interp(t[use], truth["t"], truth[state])) * factor
     std_column = estimate.get(f"{state}_std")
     std = std_column[use] * factor if std_column is not None else np.full(error.size, np.nan)
+    return inside, use, error, std
+
+
+def counts(estimate: dict, truth: dict, state: str, only_valid: bool = True, skip: float = 0.0) -> dict:
+    """Additive sums of one state on one run, in display units (pool runs with :func:`pool`)."""
+    inside, use, error, std = scored(estimate, truth, state, only_valid, skip)
+    t = estimate["t"]
     with np.errstate(divide="ignore", invalid="ignore"):
         nees = np.where(std > 0, (error / std) ** 2, np.where(np.isnan(std), np.nan, np.inf))  # no std: no NEES
     sums = {"ticks": int(inside.sum()), "valid": int((inside & valid_mask(estimate, state)).sum()),
