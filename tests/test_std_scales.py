@@ -75,3 +75,13 @@ def test_a_file_that_is_not_a_scales_output_is_named(tmp_path, capsys):
     path.write_text(json.dumps({"ckf": {}}))
     assert std_scales.main([str(path)]) == 2
     assert str(path) in capsys.readouterr().err
+
+
+def test_a_state_never_valid_is_not_judged():
+    """As in honesty.outside_targets: dckf's frictions, never valid, get no factors, rather than 'none'."""
+    rng = np.random.default_rng(7)
+    error = np.abs(rng.normal(size=500))
+    runs = [{"scales": {"dckf": {"vx": std_scales.scale_sums(error, np.ones(500), 10.0),
+                                 "mu_fl": std_scales.scale_sums(np.array([]), np.array([]), 0.1)}}}]
+    scales = honesty.pooled_scales(runs, ["dckf"])
+    assert list(scales["dckf"]) == ["vx"] and std_scales.includes_published(scales["dckf"]["vx"])

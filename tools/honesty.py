@@ -145,14 +145,15 @@ def pooled(results, filters) -> dict:
 
 def pooled_scales(results, filters) -> dict:
     """{filter: {state: [[first, last], ...]}}: the runs of factors on the std that would put the pooled score
-    within the targets (:func:`std_scales.meets_targets`)."""
+    within the targets (:func:`std_scales.meets_targets`); a state never valid is not judged, as in
+    :func:`outside_targets`."""
     out = {}
     for name in filters:
         runs = [r["scales"][name] for r in results if not r.get("failed")]
-        states = [s for s in STATES if any(s in run for run in runs)]
+        sums = {s: pool(run[s] for run in runs if s in run) for s in STATES if any(s in run for run in runs)}
         out[name] = {s: std_scales.ranges(std_scales.meets_targets(
-            pool(run[s] for run in runs if s in run), WITHIN_TWO_STD_TARGET, NEES_TARGET, VALID_BUT_WRONG_TARGET))
-            for s in states}
+            pooled_sums, WITHIN_TWO_STD_TARGET, NEES_TARGET, VALID_BUT_WRONG_TARGET))
+            for s, pooled_sums in sums.items() if pooled_sums["n"] > 0}
     return out
 
 
