@@ -569,6 +569,18 @@ def test_check_fails_the_command_when_a_state_is_outside_the_targets(capsys, tmp
                 or s["wrong_sign"] > 0), row
 
 
+def test_scales_prints_the_factors_on_the_std_as_json_and_as_a_table(capsys, tmp_path):
+    args = ["--small", "--filters", "ckf", "--workdir", str(tmp_path), "--scales"]
+    assert honesty.main(args + ["--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    outside = {row["state"] for row in out["outside"]}
+    assert set(out["scales"]["ckf"]) == {"vx", "yaw_rate", "beta"}
+    assert {s for s, runs in out["scales"]["ckf"].items() if not std_scales.includes_published(runs)} == outside
+    assert honesty.main(args) == 0
+    table = capsys.readouterr().out.split("Constant factors on the published std")[1]
+    assert "| ckf | beta |" in table and "| ckf | vx |" in table
+
+
 def test_a_windy_drive_is_cached_apart_from_the_calm_one_whose_name_is_unchanged():
     calm, gusty = honesty.Case("launch", 80.0, 0.85, 0), honesty.Case("launch", 80.0, 0.85, 0, crosswind=1.0)
     assert calm.key == "launch-80kmh-mu0.85-s0-vib0"  # the drives cached before crosswind existed
