@@ -21,7 +21,7 @@ valid ticks, share valid, coverage of +-1/2/3 std, mean NEES, the "valid but
 wrong" share and yaw rates of the wrong sign (README "How far to trust the
 output" says what each means and the targets). ``--scales`` also prints, per filter and state, the constant
 factors on the published std that would meet the targets (tools/std_scales.py: what they tell, and how to
-intersect several grids').
+intersect several grids).
 """
 from __future__ import annotations
 
@@ -268,7 +268,7 @@ def parse_args(argv=None):
                         "JSON: under the key 'outside')")
     p.add_argument("--scales", action="store_true",
                    help="also print, per filter and state, the constant factors on the published std that would meet "
-                        "the targets (JSON: under the key 'scales'; tools/std_scales.py intersects several grids')")
+                        "the targets (JSON: under the key 'scales'; tools/std_scales.py intersects several grids)")
     p.add_argument("--small", action="store_true", help="quick subset: sine, step; mu 0.35, 0.85; 1 seed; 4 s")
     args = p.parse_args(argv)
     if args.small:
