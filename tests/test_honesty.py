@@ -79,7 +79,8 @@ def test_the_std_as_published_meets_the_targets_exactly_where_its_factor_1_does(
     judged = [(name, state) for name, states in scores.items() for state, score in states.items() if score.valid > 0]
     assert len(judged) > 3 * len(FILTERS)
     for name, state in judged:
-        assert std_scales.includes_published(scales[name][state]) == ((name, state) not in outside), (name, state, scales[name][state])
+        assert std_scales.includes_published(scales[name][state]) == ((name, state) not in outside), \
+            (name, state, scales[name][state])
 
 
 @pytest.mark.parametrize("name", FILTERS)

@@ -133,28 +133,27 @@ def grid(config_path, filters, cases, workdir: Path, jobs: int = 1, report=print
     return sorted(results, key=lambda r: r["case"].key)
 
 
+def pooled_sums(results, kind: str, name: str) -> dict:
+    """{state: sums} of filter ``name`` pooled over every simulated case, from each result's ``kind`` of sums
+    (``"sums"``: :func:`canest.apps.evaluate.counts`'; ``"scales"``: :func:`std_scales.scale_sums`')."""
+    runs = [r[kind][name] for r in results if not r.get("failed")]
+    return {s: pool(run[s] for run in runs if s in run) for s in STATES if any(s in run for run in runs)}
+
+
 def pooled(results, filters) -> dict:
     """{filter: {state: Score}} over every simulated case."""
-    out = {}
-    for name in filters:
-        runs = [r["sums"][name] for r in results if not r.get("failed")]
-        out[name] = {s: summarize(s, pool(run[s] for run in runs if s in run)) for s in STATES
-                     if any(s in run for run in runs)}
-    return out
+    return {name: {s: summarize(s, sums) for s, sums in pooled_sums(results, "sums", name).items()}
+            for name in filters}
 
 
 def pooled_scales(results, filters) -> dict:
     """{filter: {state: [[first, last], ...]}}: the runs of factors on the std that would put the pooled score
     within the targets (:func:`std_scales.meets_targets`); a state never valid is not judged, as in
     :func:`outside_targets`."""
-    out = {}
-    for name in filters:
-        runs = [r["scales"][name] for r in results if not r.get("failed")]
-        sums = {s: pool(run[s] for run in runs if s in run) for s in STATES if any(s in run for run in runs)}
-        out[name] = {s: std_scales.ranges(std_scales.meets_targets(
-            pooled_sums, WITHIN_TWO_STD_TARGET, NEES_TARGET, VALID_BUT_WRONG_TARGET))
-            for s, pooled_sums in sums.items() if pooled_sums["n"] > 0}
-    return out
+    return {name: {s: std_scales.ranges(std_scales.meets_targets(
+                       sums, WITHIN_TWO_STD_TARGET, NEES_TARGET, VALID_BUT_WRONG_TARGET))
+                   for s, sums in pooled_sums(results, "scales", name).items() if sums["n"] > 0}
+            for name in filters}
 
 
 def per_case(results, filters, state: str) -> list:

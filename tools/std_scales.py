@@ -6,8 +6,8 @@
     python tools/honesty.py --filters all --seeds 3 --scales --json --car drawn --vibration 1 > vibrating.json
     python tools/std_scales.py exact.json drawn.json vibrating.json
 
-A std that is only too wide or too narrow is mended by a factor ``k`` (publish ``k std``; 0.1-10 here). ``tools/honesty.py
---scales`` pools, for every factor of :data:`FACTORS`, the sums the targets are judged on (within 2 std, mean
+A std that is only too wide or too narrow is mended by a factor ``k`` (publish ``k std``; 0.1-10 here).
+``tools/honesty.py --scales`` pools, for every factor of :data:`FACTORS`, the sums the targets are judged on (within 2 std, mean
 NEES, valid but wrong) over a grid's valid ticks, and prints the factors that would meet them all. Two ways to
 find none:
 
